@@ -1,0 +1,24 @@
+# Every dependency comes from Debian packages (scripts/install-deps.sh).
+# Order matters: TBB's config before OpenVDB's find module, which would otherwise define TBB::tbb itself.
+find_package(Threads REQUIRED)
+find_package(TBB CONFIG REQUIRED)
+
+list(APPEND CMAKE_MODULE_PATH /usr/lib/x86_64-linux-gnu/cmake/OpenVDB /usr/lib/cmake/OpenVDB)
+find_package(OpenVDB REQUIRED)
+if(NOT EXISTS /usr/include/nanovdb/NanoVDB.h)
+  message(FATAL_ERROR "NanoVDB headers not found: install libnanovdb-dev")
+endif()
+
+find_package(embree 3 REQUIRED)
+find_package(OpenEXR REQUIRED)
+find_package(PNG REQUIRED)
+find_package(TIFF REQUIRED)
+find_package(CLI11 CONFIG REQUIRED)
+find_package(nlohmann_json 3 REQUIRED)
+find_package(assimp REQUIRED)
+if(FLUOROSIM_BUILD_TESTS)
+  find_package(GTest REQUIRED)
+endif()
+if(FLUOROSIM_BUILD_BENCH)
+  find_package(benchmark REQUIRED)
+endif()

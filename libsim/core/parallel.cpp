@@ -1,0 +1,26 @@
+#include "core/parallel.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/info.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+namespace fluorosim {
+
+int defaultThreadCount() { return tbb::info::default_concurrency(); }
+
+void parallelFor(size_t count, int threads, const std::function<void(size_t)>& body) {
+    if (threads <= 0) threads = defaultThreadCount();
+    if (threads == 1) {
+        for (size_t i = 0; i < count; ++i) body(i);
+        return;
+    }
+    tbb::task_arena arena(threads);
+    arena.execute([&] {
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 1), [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t i = r.begin(); i != r.end(); ++i) body(i);
+        });
+    });
+}
+
+}  // namespace fluorosim

@@ -1,0 +1,30 @@
+#pragma once
+// Sampling warps with their pdfs. Each sampler has a chi-square test in tests/statistical.
+#include <array>
+#include <cmath>
+#include <span>
+
+#include "core/math.h"
+#include "core/vec3.h"
+
+namespace fluorosim {
+
+inline Vec3 sampleUniformSphere(double u1, double u2) {
+    const double z = 1.0 - 2.0 * u1;
+    const double r = safeSqrt(1.0 - z * z);
+    const double phi = 2.0 * kPi * u2;
+    return {r * std::cos(phi), r * std::sin(phi), z};
+}
+inline constexpr double uniformSpherePdf() { return kInv4Pi; }
+
+// Cosine-weighted hemisphere around +z (Malley's method on a concentric disk).
+Vec3 sampleCosineHemisphere(double u1, double u2);
+inline double cosineHemispherePdf(double cosTheta) { return cosTheta > 0 ? cosTheta * kInvPi : 0.0; }
+
+// Uniform point on a triangle, as barycentrics (b0, b1) (Heitz 2019 low-distortion map).
+std::array<double, 2> sampleUniformTriangle(double u1, double u2);
+
+// Index into weights with probability proportional to weight; u is remapped to a fresh uniform.
+int sampleDiscrete(std::span<const double> weights, double u, double* pmf = nullptr, double* uRemapped = nullptr);
+
+}  // namespace fluorosim

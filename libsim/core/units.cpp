@@ -1,0 +1,89 @@
+#include "core/units.h"
+
+#include <cctype>
+#include <charconv>
+#include <cmath>
+
+#include "core/errors.h"
+
+namespace fluorosim {
+namespace {
+
+std::string_view trim(std::string_view s) {
+    while (!s.empty() && std::isspace(static_cast<unsigned char>(s.front()))) s.remove_prefix(1);
+    while (!s.empty() && std::isspace(static_cast<unsigned char>(s.back()))) s.remove_suffix(1);
+    return s;
+}
+
+std::optional<double> lengthInMm(std::string_view u) {
+    if (u == "m") return 1e3;
+    if (u == "cm") return 10.0;
+    if (u == "mm") return 1.0;
+    if (u == "um" || u == "µm" || u == "micron") return 1e-3;
+    if (u == "nm") return 1e-6;
+    return std::nullopt;
+}
+
+}  // namespace
+
+const char* dimensionName(Dimension d) {
+    switch (d) {
+        case Dimension::Length: return "a length (e.g. \"5 mm\")";
+        case Dimension::InverseLength: return "a coefficient (e.g. \"90 /cm\")";
+        case Dimension::Wavelength: return "a wavelength (e.g. \"550 nm\")";
+        case Dimension::Dimensionless: return "a number";
+    }
+    return "?";
+}
+
+std::optional<double> unitScale(std::string_view unit, Dimension dim) {
+    unit = trim(unit);
+    switch (dim) {
+        case Dimension::Length: return lengthInMm(unit);
+        case Dimension::Wavelength: {
+            if (unit == "nm") return 1.0;
+            if (unit == "um" || unit == "µm") return 1e3;
+            return std::nullopt;
+        }
+        case Dimension::InverseLength: {
+            std::string_view u = unit;
+            if (!u.empty() && u.front() == '/') u = trim(u.substr(1));
+            else if (u.size() > 2 && u.substr(0, 2) == "1/") u = trim(u.substr(2));
+            else if (u.size() > 3 && u.substr(u.size() - 3) == "^-1") u = trim(u.substr(0, u.size() - 3));
+            else return std::nullopt;
+            const auto l = lengthInMm(u);
+            if (!l) return std::nullopt;
+            return 1.0 / *l;
+        }
+        case Dimension::Dimensionless: return unit.empty() ? std::optional<double>(1.0) : std::nullopt;
+    }
+    return std::nullopt;
+}
+
+double parseQuantity(std::string_view text, Dimension dim, std::string_view what,
+                     std::optional<std::string_view> bareUnit) {
+    const std::string_view s = trim(text);
+    auto fail = [&](const std::string& why) -> double {
+        throw ConfigError(std::string(what) + ": " + why + " (got \"" + std::string(text) + "\", expected " +
+                          dimensionName(dim) + ")");
+    };
+    double value = 0;
+    const char* begin = s.data();
+    const char* end = s.data() + s.size();
+    // from_chars rejects a leading '+', accept it for convenience.
+    if (begin != end && *begin == '+') ++begin;
+    const auto [ptr, ec] = std::from_chars(begin, end, value);
+    if (ec != std::errc() || ptr == begin) return fail("not a number");
+    if (!std::isfinite(value)) return fail("not finite");
+    const std::string_view unit = trim(std::string_view(ptr, static_cast<size_t>(end - ptr)));
+    if (unit.empty()) {
+        if (dim == Dimension::Dimensionless) return value;
+        if (!bareUnit) return fail("missing unit");
+        return value * *unitScale(*bareUnit, dim);
+    }
+    const auto scale = unitScale(unit, dim);
+    if (!scale) return fail("unknown or mismatched unit \"" + std::string(unit) + "\"");
+    return value * *scale;
+}
+
+}  // namespace fluorosim

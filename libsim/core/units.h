@@ -1,0 +1,23 @@
+#pragma once
+// Quantities with units. Internal units (docs/units.md): length in mm, coefficients in 1/mm,
+// wavelength in nm.
+#include <optional>
+#include <string>
+#include <string_view>
+
+namespace fluorosim {
+
+enum class Dimension { Length, InverseLength, Wavelength, Dimensionless };
+
+const char* dimensionName(Dimension d);
+
+// Parses "5 mm", "0.2mm", "90 /cm", "9/mm", "550 nm", "1.5um" into internal units.
+// A bare number is accepted only when bareUnit is given (e.g. "cm" for MCML-style CLI options);
+// otherwise it is an error. Throws ConfigError naming `what` and the text.
+double parseQuantity(std::string_view text, Dimension dim, std::string_view what,
+                     std::optional<std::string_view> bareUnit = std::nullopt);
+
+// Scale from a unit name to internal units, or nullopt when the unit does not fit the dimension.
+std::optional<double> unitScale(std::string_view unit, Dimension dim);
+
+}  // namespace fluorosim

@@ -1,0 +1,144 @@
+#include "render/slab_transport.h"
+
+#include <chrono>
+#include <cmath>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "core/errors.h"
+#include "core/math.h"
+#include "core/parallel.h"
+#include "core/rng.h"
+#include "materials/fresnel.h"
+#include "media/free_flight.h"
+#include "media/henyey_greenstein.h"
+
+namespace fluorosim {
+namespace {
+
+constexpr uint64_t kPhotonsPerChunk = 1 << 14;
+// MCML's Russian roulette: below kWeightThreshold a photon survives with probability kSurvival.
+constexpr double kWeightThreshold = 1e-4;
+constexpr double kSurvival = 0.1;
+
+struct Tally {
+    double r = 0, r2 = 0, t = 0, t2 = 0, ballistic = 0;
+};
+
+void requireFinite(const char* name, double v, bool allowZero) {
+    if (!std::isfinite(v) || v < 0 || (!allowZero && v == 0))
+        throw ConfigError(std::string("--") + name + ": must be finite and " + (allowZero ? "non-negative" : "positive") +
+                          ", got " + std::to_string(v));
+}
+
+}  // namespace
+
+void SlabOptions::validate() const {
+    requireFinite("mua", mua, true);
+    requireFinite("mus", mus, true);
+    requireFinite("thickness", thickness, false);
+    if (!(g > -1 && g < 1)) throw ConfigError("--g: must lie in (-1, 1), got " + std::to_string(g));
+    for (auto [name, v] : {std::pair{"n", n}, {"n-above", nAbove}, {"n-below", nBelow}})
+        if (!std::isfinite(v) || v < 1.0 || v > 10.0)
+            throw ConfigError(std::string("--") + name + ": refractive index must lie in [1, 10], got " + std::to_string(v));
+    if (photons < 2) throw ConfigError("--photons: need at least 2 photons, got " + std::to_string(photons));
+    if (photons > (uint64_t(1) << 40)) throw ConfigError("--photons: too many (" + std::to_string(photons) + ")");
+    if (threads < 0) throw ConfigError("--threads: must be >= 0, got " + std::to_string(threads));
+}
+
+SlabResult simulateSlab(const SlabOptions& opt, const std::function<void(uint64_t, uint64_t)>& progress) {
+    opt.validate();
+    const auto start = std::chrono::steady_clock::now();
+    const HenyeyGreenstein phase(opt.g);
+    const double mut = opt.mua + opt.mus;
+    const double albedo = mut > 0 ? opt.mus / mut : 0.0;
+    const double d = opt.thickness;
+    const double rsp = sqr((opt.nAbove - opt.n) / (opt.nAbove + opt.n));
+
+    const uint64_t chunks = (opt.photons + kPhotonsPerChunk - 1) / kPhotonsPerChunk;
+    std::vector<Tally> tallies(chunks);
+    std::mutex progressMutex;
+    uint64_t done = 0;
+
+    parallelFor(chunks, opt.threads, [&](size_t chunk) {
+        Rng rng = Rng::forKey(opt.seed, chunk, 0x51ab);
+        Tally tally;
+        const uint64_t first = chunk * kPhotonsPerChunk;
+        const uint64_t count = std::min<uint64_t>(kPhotonsPerChunk, opt.photons - first);
+        for (uint64_t p = 0; p < count; ++p) {
+            Vec3 pos(0, 0, 0), dir(0, 0, 1);
+            double w = 1.0 - rsp;
+            bool scattered = false;
+            while (true) {
+                const double tBoundary = dir.z > 0 ? (d - pos.z) / dir.z
+                                         : dir.z < 0 ? -pos.z / dir.z
+                                                     : std::numeric_limits<double>::infinity();
+                double tCollision = -1;
+                sampleTmaj<double>(HomogeneousMajorantIterator<double>(0.0, tBoundary, mut), rng,
+                                   [&](double t, double, double) {
+                                       tCollision = t;
+                                       return false;
+                                   });
+                if (tCollision >= 0) {
+                    pos = pos + dir * tCollision;
+                    // Implicit capture: the absorbed fraction leaves the weight, the scattered one goes on.
+                    w *= albedo;
+                    if (w < kWeightThreshold) {
+                        if (w == 0.0 || rng.uniform() >= kSurvival) break;
+                        w /= kSurvival;
+                    }
+                    dir = phase.sample(dir, rng.uniform(), rng.uniform());
+                    scattered = true;
+                    continue;
+                }
+                pos = pos + dir * tBoundary;
+                pos.z = dir.z > 0 ? d : 0.0;  // snap to the boundary to stop drift
+                const double nOut = dir.z > 0 ? opt.nBelow : opt.nAbove;
+                const double reflectance = fresnelDielectric(std::abs(dir.z), nOut / opt.n);
+                if (reflectance > 0 && (reflectance >= 1.0 || rng.uniform() < reflectance)) {
+                    dir.z = -dir.z;
+                    continue;
+                }
+                if (dir.z < 0) {
+                    tally.r += w;
+                    tally.r2 += w * w;
+                } else {
+                    tally.t += w;
+                    tally.t2 += w * w;
+                    if (!scattered) tally.ballistic += w;
+                }
+                break;
+            }
+        }
+        tallies[chunk] = tally;
+        if (progress) {
+            std::lock_guard<std::mutex> lock(progressMutex);
+            done += count;
+            progress(done, opt.photons);
+        }
+    });
+
+    Tally sum;
+    for (const Tally& t : tallies) {
+        sum.r += t.r;
+        sum.r2 += t.r2;
+        sum.t += t.t;
+        sum.t2 += t.t2;
+        sum.ballistic += t.ballistic;
+    }
+    const double n = static_cast<double>(opt.photons);
+    SlabResult res;
+    res.photons = opt.photons;
+    res.Rsp = rsp;
+    res.Rd = sum.r / n;
+    res.Tt = sum.t / n;
+    res.Ta = 1.0 - rsp - res.Rd - res.Tt;  // unbiased, as roulette conserves energy in expectation
+    res.Tballistic = sum.ballistic / n;
+    res.RdStderr = std::sqrt(std::max(0.0, sum.r2 / n - res.Rd * res.Rd) / (n - 1));
+    res.TtStderr = std::sqrt(std::max(0.0, sum.t2 / n - res.Tt * res.Tt) / (n - 1));
+    res.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return res;
+}
+
+}  // namespace fluorosim
