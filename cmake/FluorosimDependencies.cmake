@@ -2,6 +2,8 @@
 # Order matters: TBB's config before OpenVDB's find module, which would otherwise define TBB::tbb itself.
 find_package(Threads REQUIRED)
 find_package(TBB CONFIG REQUIRED)
+# OpenEXR's own config (with Imath include paths), before OpenVDB's find modules shadow it.
+find_package(OpenEXR 3 CONFIG REQUIRED)
 
 list(APPEND CMAKE_MODULE_PATH /usr/lib/x86_64-linux-gnu/cmake/OpenVDB /usr/lib/cmake/OpenVDB)
 find_package(OpenVDB REQUIRED)
@@ -10,7 +12,6 @@ if(NOT EXISTS /usr/include/nanovdb/NanoVDB.h)
 endif()
 
 find_package(embree 3 REQUIRED)
-find_package(OpenEXR REQUIRED)
 find_package(PNG REQUIRED)
 find_package(TIFF REQUIRED)
 find_package(CLI11 CONFIG REQUIRED)

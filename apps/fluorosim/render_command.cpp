@@ -1,0 +1,126 @@
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <unistd.h>
+
+#include "commands.h"
+#include "core/errors.h"
+#include "database.h"
+#include "io/image_io.h"
+#include "progress.h"
+#include "render/renderer.h"
+#include "scene/scene_loader.h"
+
+namespace fluorosim::app {
+namespace fs = std::filesystem;
+namespace {
+
+std::atomic<bool> gCancel{false};
+extern "C" void onSignal(int) { gCancel.store(true); }
+
+struct RenderArgs {
+    std::string scene, output;
+    int spp = -1, threads = 0;
+    int64_t seed = -1;
+    double checkpointSeconds = 60;
+};
+
+void checkWritable(const fs::path& out) {
+    const fs::path dir = out.has_parent_path() ? out.parent_path() : fs::path(".");
+    if (!fs::is_directory(dir)) throw IoError(out.string() + ": output folder \"" + dir.string() + "\" does not exist");
+    // Probe the folder now rather than after an hour of rendering.
+    const fs::path probe = dir / (".fluorosim-write-test-" + std::to_string(::getpid()));
+    std::ofstream f(probe);
+    if (!f) throw IoError(out.string() + ": output folder \"" + dir.string() + "\" is not writable");
+    f.close();
+    fs::remove(probe);
+    if (out.extension() != ".exr") throw ConfigError(out.string() + ": output must be an .exr file");
+}
+
+double autoExposure(const ExrImage& img) {
+    std::vector<float> lum;
+    for (size_t p = 0; p + 2 < img.rgb.size(); p += 3) lum.push_back(0.2126f * img.rgb[p] + 0.7152f * img.rgb[p + 1] + 0.0722f * img.rgb[p + 2]);
+    if (lum.empty()) return 1.0;
+    const size_t k = lum.size() * 99 / 100;
+    std::nth_element(lum.begin(), lum.begin() + static_cast<long>(k), lum.end());
+    return lum[k] > 0 ? 1.0 / lum[k] : 1.0;
+}
+
+void writeOutputs(const fs::path& out, const Film& film, const Scene& scene, int sppDone, const RenderSummary* summary) {
+    ExrImage img = film.image(sppDone);
+    img.attributes["fluorosim.spp"] = std::to_string(sppDone);
+    img.attributes["fluorosim.seed"] = std::to_string(scene.render.seed);
+    img.attributes["fluorosim.wavelengthRange"] = std::to_string(scene.spectral.lambdaMin) + "-" + std::to_string(scene.spectral.lambdaMax) + " nm";
+    if (summary) img.attributes["fluorosim.nonFiniteSamples"] = std::to_string(summary->nonFiniteSamples);
+    // Write to a temporary name first so an interrupted write never destroys a finished image.
+    const fs::path tmp = out.string() + ".partial.exr";
+    writeExr(tmp.string(), img);
+    fs::rename(tmp, out);
+    fs::path png = out;
+    png.replace_extension(".png");
+    writePngPreview(png.string(), img.width, img.height, img.rgb, autoExposure(img));
+}
+
+void runRender(const RenderArgs& a) {
+    const fs::path out = a.output;
+    checkWritable(out);
+    const spectra::Database db;
+    Scene scene = loadScene(a.scene, [&db](const std::string& ref, const fs::path& base) { return db.resolve(ref, base); });
+    if (a.seed >= 0) scene.render.seed = static_cast<uint64_t>(a.seed);
+    RenderOptions opt;
+    opt.spp = a.spp != -1 ? a.spp : scene.render.spp;
+    opt.validate();
+    opt.threads = a.threads;
+    opt.seed = scene.render.seed;
+    opt.sppPerPass = std::max(1, opt.spp / 64);
+    opt.cancel = &gCancel;
+    Film film(scene.camera.width, scene.camera.height, scene.spectral.lambdaMin, scene.spectral.lambdaMax, scene.spectral.binWidth, db.cie1931());
+    ProgressBar bar("render");
+    opt.progress = [&](double f) { bar.update(f); };
+    auto lastCheckpoint = std::chrono::steady_clock::now();
+    opt.passFinished = [&](const Film& f, int sppDone) {
+        const auto now = std::chrono::steady_clock::now();
+        if (sppDone < opt.spp && std::chrono::duration<double>(now - lastCheckpoint).count() > a.checkpointSeconds) {
+            writeOutputs(out, f, scene, sppDone, nullptr);
+            lastCheckpoint = now;
+        }
+    };
+    std::signal(SIGINT, onSignal);
+    std::signal(SIGTERM, onSignal);
+    const RenderSummary s = render(scene, film, opt);
+    bar.finish();
+    if (s.sppCompleted == 0) throw Error("interrupted before the first pass finished; nothing written");
+    writeOutputs(out, film, scene, s.sppCompleted, &s);
+    fs::path png = out;
+    png.replace_extension(".png");
+    const double bounces = static_cast<double>(s.stats.scatteringEvents + s.stats.surfaceBounces) / std::max<double>(1.0, static_cast<double>(s.stats.paths));
+    std::printf("{\"image\": \"%s\", \"preview\": \"%s\", \"spp\": %d, \"seconds\": %.3f, \"paths\": %llu, "
+                "\"mean_path_vertices\": %.3f, \"non_finite_samples\": %llu, \"truncated_paths\": %llu, \"cancelled\": %s}\n",
+                out.string().c_str(), png.string().c_str(), s.sppCompleted, s.seconds, static_cast<unsigned long long>(s.stats.paths),
+                bounces, static_cast<unsigned long long>(s.nonFiniteSamples), static_cast<unsigned long long>(s.stats.truncated),
+                s.cancelled ? "true" : "false");
+    std::fprintf(stderr, "fluorosim: wrote %s and %s (%d spp in %.1f s)%s\n", out.string().c_str(), png.string().c_str(),
+                 s.sppCompleted, s.seconds, s.cancelled ? " -- interrupted, finished passes kept" : "");
+    if (s.nonFiniteSamples > 0)
+        std::fprintf(stderr, "fluorosim: warning: %llu non-finite samples were dropped\n", static_cast<unsigned long long>(s.nonFiniteSamples));
+    if (s.cancelled) throw Error("render interrupted after " + std::to_string(s.sppCompleted) + " spp (image written)");
+}
+
+}  // namespace
+
+void addRenderCommand(CLI::App& app) {
+    auto args = std::make_shared<RenderArgs>();
+    CLI::App* cmd = app.add_subcommand("render", "Render a scene to a spectral OpenEXR image and a PNG preview");
+    cmd->add_option("scene", args->scene, "Scene file (JSON)")->required();
+    cmd->add_option("-o,--output", args->output, "Output .exr (a .png preview is written next to it)")->required();
+    cmd->add_option("--spp", args->spp, "Samples per pixel (default: the scene's)");
+    cmd->add_option("--threads", args->threads, "Threads (0 = all cores)");
+    cmd->add_option("--seed", args->seed, "Random seed (default: the scene's)");
+    cmd->add_option("--checkpoint-seconds", args->checkpointSeconds, "Write the image every this many seconds");
+    cmd->callback([args] { runRender(*args); });
+}
+
+}  // namespace fluorosim::app

@@ -1,0 +1,79 @@
+#include <cstdio>
+#include <memory>
+
+#include "commands.h"
+#include "core/errors.h"
+#include "core/units.h"
+#include "progress.h"
+#include "render/slab_transport.h"
+
+namespace fluorosim::app {
+namespace {
+
+struct SlabArgs {
+    std::string mua = "0", mus = "0", thickness, n = "1", nAbove = "1", nBelow = "1";
+    double g = 0;
+    double photons = 1e6;
+    uint64_t seed = 1;
+    int threads = 0;
+    bool quiet = false;
+};
+
+double index(const std::string& s, const char* name) {
+    return parseQuantity(s, Dimension::Dimensionless, std::string("--") + name);
+}
+
+void runSlab(const SlabArgs& a) {
+    SlabOptions o;
+    // Bare numbers follow MCML: 1/cm and cm. Internally everything is mm.
+    o.mua = parseQuantity(a.mua, Dimension::InverseLength, "--mua", "/cm");
+    o.mus = parseQuantity(a.mus, Dimension::InverseLength, "--mus", "/cm");
+    o.thickness = parseQuantity(a.thickness, Dimension::Length, "--thickness", "cm");
+    o.g = a.g;
+    o.n = index(a.n, "n");
+    o.nAbove = index(a.nAbove, "n-above");
+    o.nBelow = index(a.nBelow, "n-below");
+    if (!(a.photons >= 2 && a.photons <= 1.1e12))
+        throw ConfigError("--photons: must lie in [2, 1.1e12], got " + std::to_string(a.photons));
+    o.photons = static_cast<uint64_t>(a.photons);
+    o.seed = a.seed;
+    o.threads = a.threads;
+    o.validate();
+    std::unique_ptr<ProgressBar> bar;
+    if (!a.quiet) bar = std::make_unique<ProgressBar>("slab");
+    const SlabResult r = simulateSlab(o, [&](uint64_t done, uint64_t total) {
+        if (bar) bar->update(static_cast<double>(done) / static_cast<double>(total));
+    });
+    if (bar) bar->finish();
+    std::printf(
+        "{\"Rd\": %.8f, \"Tt\": %.8f, \"Rd_stderr\": %.8f, \"Tt_stderr\": %.8f, \"Rsp\": %.8f, \"Ta\": %.8f, "
+        "\"Tt_ballistic\": %.8f, \"photons\": %llu, \"seconds\": %.4f, \"photons_per_second\": %.1f, "
+        "\"input\": {\"mua_per_cm\": %.8g, \"mus_per_cm\": %.8g, \"g\": %.8g, \"thickness_cm\": %.8g, \"n\": %.8g, "
+        "\"n_above\": %.8g, \"n_below\": %.8g, \"seed\": %llu}}\n",
+        r.Rd, r.Tt, r.RdStderr, r.TtStderr, r.Rsp, r.Ta, r.Tballistic, static_cast<unsigned long long>(r.photons), r.seconds,
+        static_cast<double>(r.photons) / std::max(r.seconds, 1e-9), o.mua * 10, o.mus * 10, o.g, o.thickness / 10, o.n, o.nAbove,
+        o.nBelow, static_cast<unsigned long long>(o.seed));
+}
+
+}  // namespace
+
+void addValidateCommands(CLI::App& app) {
+    CLI::App* validate = app.add_subcommand("validate", "Validation runs against independent results");
+    validate->require_subcommand(1);
+    auto a = std::make_shared<SlabArgs>();
+    CLI::App* slab = validate->add_subcommand("slab", "Rd and Tt of a slab under a normal pencil beam (MCML conventions)");
+    slab->add_option("--mua", a->mua, "Absorption coefficient (bare: 1/cm; or e.g. 9/mm)");
+    slab->add_option("--mus", a->mus, "Scattering coefficient (bare: 1/cm)");
+    slab->add_option("--g", a->g, "Henyey-Greenstein anisotropy in (-1, 1)");
+    slab->add_option("--thickness", a->thickness, "Slab thickness (bare: cm; or e.g. 0.2mm)")->required();
+    slab->add_option("--n", a->n, "Refractive index of the slab");
+    slab->add_option("--n-above", a->nAbove, "Refractive index above (incident side)");
+    slab->add_option("--n-below", a->nBelow, "Refractive index below");
+    slab->add_option("--photons", a->photons, "Number of photons (e.g. 1e6)");
+    slab->add_option("--seed", a->seed, "Random seed");
+    slab->add_option("--threads", a->threads, "Threads (0 = all cores)");
+    slab->add_flag("--quiet", a->quiet, "No progress bar");
+    slab->callback([a] { runSlab(*a); });
+}
+
+}  // namespace fluorosim::app

@@ -1,0 +1,40 @@
+#pragma once
+// Per-pixel spectral and XYZ accumulation. Each pixel is written by one work item at a time, in
+// sample order, so the image is bit-identical for any thread count.
+#include <cstdint>
+#include <vector>
+
+#include "io/image_io.h"
+#include "spectral/color.h"
+#include "spectral/sampled_wavelengths.h"
+
+namespace fluorosim {
+
+class Film {
+public:
+    Film(int width, int height, double lambdaMin, double lambdaMax, double binWidth, ColorMatchingFunctions cmf);
+    int width() const { return width_; }
+    int height() const { return height_; }
+    int binCount() const { return static_cast<int>(binCenters_.size()); }
+    const std::vector<double>& binCenters() const { return binCenters_; }
+
+    // Adds one path's radiance estimate; non-finite estimates are counted and dropped.
+    void addSample(int x, int y, const SampledSpectrum& L, const SampledWavelengths& wl);
+    // Mean over `samplesPerPixel`: spectral radiance per bin (per nm) and XYZ (Y = luminance-weighted
+    // radiance normalized so a flat spectrum of 1 gives Y = 1).
+    ExrImage image(int samplesPerPixel) const;
+    uint64_t nonFiniteSamples() const;
+    double meanLuminance(int samplesPerPixel) const;
+
+private:
+    int width_, height_;
+    double lambdaMin_, binWidth_;
+    std::vector<double> binCenters_;
+    ColorMatchingFunctions cmf_;
+    double yIntegral_;
+    std::vector<double> xyz_;       // 3 per pixel
+    std::vector<double> spectral_;  // bins per pixel
+    std::vector<uint32_t> nonFinite_;
+};
+
+}  // namespace fluorosim

@@ -1,0 +1,228 @@
+#include "render/path_tracer.h"
+
+#include <array>
+#include <cmath>
+
+#include "core/math.h"
+#include "core/sampling.h"
+#include "media/free_flight.h"
+
+namespace fluorosim {
+namespace {
+
+Vec3 offsetAlong(const Vec3& p, const Vec3& n, const Vec3& dir) {
+    const double eps = rayEpsilon(p);
+    return p + n * (dot(n, dir) > 0 ? eps : -eps);
+}
+
+SampledSpectrum clampZero(const SampledSpectrum& s) {
+    SampledSpectrum r;
+    for (int i = 0; i < kNumWavelengths; ++i) r[i] = std::max(0.0, s[i]);
+    return r;
+}
+
+}  // namespace
+
+int PathTracer::mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const Vec3& dir, int current) const {
+    if (!shape.isInterface) return current;
+    return dot(dir, n) < 0 ? shape.insideMedium : shape.outsideMedium;
+}
+
+SampledSpectrum PathTracer::transmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl) const {
+    SampledSpectrum T(1.0);
+    Vec3 origin = p0;
+    for (int crossings = 0; crossings < 1024; ++crossings) {
+        const Vec3 d = p1 - origin;
+        const double dist = length(d);
+        if (!(dist > 0)) return T;
+        const Ray r{origin, d / dist};
+        const double eps = rayEpsilon(p1);
+        const auto hit = scene_.geometry.intersect(r, 0.0, dist - eps);
+        const double segment = hit ? hit->t : dist;
+        if (medium != kNone) {
+            // Homogeneous media: the exact transmittance, with no sampling noise.
+            const MediumSample m = scene_.media[static_cast<size_t>(medium)].coefficients(wl);
+            T *= expNeg((m.sigmaA + m.sigmaS) * segment);
+        }
+        if (!hit) return T;
+        const ShapeInfo& s = scene_.shapes[hit->shape];
+        if (!(s.isInterface && s.material == kNone)) return SampledSpectrum(0.0);
+        medium = mediumAfterCrossing(s, hit->n, r.d, medium);
+        origin = offsetAlong(hit->p, hit->n, r.d);
+    }
+    return SampledSpectrum(0.0);
+}
+
+SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const {
+    SampledSpectrum L(0.0), beta(1.0), r_u(1.0), r_l(1.0);
+    bool specularBounce = false;
+    double etaScale = 1.0;
+    int depth = 0;
+    Vec3 prevScatter = ray.o;
+    ++stats.paths;
+
+    // NEE from a scattering vertex. evalScatter(wi) returns {f * |cos| (or phase value), pdf}.
+    // At a surface, `surface` and `n` let the light ray leave through the side of wi (transmission).
+    auto directLight = [&](const Vec3& p, int lightMedium, const SampledSpectrum& r_p, auto&& evalScatter,
+                           const Vec3& nOffset, const ShapeInfo* surface) -> SampledSpectrum {
+        const double uLight = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform();
+        const auto ls = lights_.sample(p, uLight, u1, u2, wl);
+        if (!ls || !ls->L || !(ls->pdf > 0)) return SampledSpectrum(0.0);
+        const auto [fHat, scatterPdf] = evalScatter(ls->wi);
+        if (!fHat) return SampledSpectrum(0.0);
+        Vec3 origin = p;
+        int startMedium = lightMedium;
+        if (surface) {
+            origin = offsetAlong(p, nOffset, ls->wi);
+            startMedium = mediumAfterCrossing(*surface, nOffset, ls->wi, lightMedium);
+        }
+        const SampledSpectrum T = transmittance(origin, ls->p, startMedium, wl);
+        if (!T) return SampledSpectrum(0.0);
+        const SampledSpectrum rl = r_p * ls->pdf;
+        if (ls->delta) return beta * fHat * T * ls->L / rl.average();
+        const SampledSpectrum ru = r_p * scatterPdf;
+        return beta * fHat * T * ls->L / (rl + ru).average();
+    };
+
+    while (true) {
+        const auto hit = scene_.geometry.intersect(ray, 0.0, std::numeric_limits<double>::infinity());
+        if (medium != kNone && !scene_.media[static_cast<size_t>(medium)].isVacuumLike()) {
+            const HomogeneousMedium& med = scene_.media[static_cast<size_t>(medium)];
+            const double tMax = hit ? hit->t : std::numeric_limits<double>::infinity();
+            bool scattered = false, terminated = false;
+            const MediumSample mp = med.coefficients(wl);
+            const SampledSpectrum T_maj = sampleTmaj<SampledSpectrum>(
+                med.majorants(0.0, tMax, wl), rng, [&](double t, const SampledSpectrum& sigmaMaj, const SampledSpectrum& Tm) {
+                    const double pAbsorb = mp.sigmaA[0] / sigmaMaj[0];
+                    const double pScatter = mp.sigmaS[0] / sigmaMaj[0];
+                    const double pNull = std::max(0.0, 1.0 - pAbsorb - pScatter);
+                    const std::array<double, 3> probs{pAbsorb, pScatter, pNull};
+                    const int mode = sampleDiscrete(probs, rng.uniform());
+                    if (mode == 0) {
+                        terminated = true;
+                        return false;
+                    }
+                    if (mode == 1) {
+                        const double pdf = Tm[0] * mp.sigmaS[0];
+                        beta *= Tm * mp.sigmaS / pdf;
+                        r_u *= Tm * mp.sigmaS / pdf;
+                        ++stats.scatteringEvents;
+                        if (++depth >= scene_.render.maxDepth) {
+                            ++stats.truncated;
+                            terminated = true;
+                            return false;
+                        }
+                        if (beta && r_u) {
+                            const Vec3 p = ray.at(t);
+                            const HenyeyGreenstein& phase = med.phase();
+                            const Vec3 dirIn = ray.d;
+                            L += directLight(
+                                p, medium, r_u,
+                                [&](const Vec3& wi) {
+                                    const double v = phase.pdf(dirIn, wi);
+                                    return std::pair{SampledSpectrum(v), v};
+                                },
+                                Vec3(), nullptr);
+                            double phasePdf = 0;
+                            const Vec3 wi = phase.sample(dirIn, rng.uniform(), rng.uniform(), &phasePdf);
+                            // HG is sampled exactly, so f / pdf = 1 and beta is unchanged.
+                            r_l = r_u / phasePdf;
+                            prevScatter = p;
+                            specularBounce = false;
+                            ray = Ray{p, wi};
+                            scattered = true;
+                        }
+                        return false;
+                    }
+                    const SampledSpectrum sigmaN = clampZero(sigmaMaj - mp.sigmaA - mp.sigmaS);
+                    const double pdf = Tm[0] * sigmaN[0];
+                    if (pdf == 0) beta = SampledSpectrum(0.0);
+                    else {
+                        beta *= Tm * sigmaN / pdf;
+                        r_u *= Tm * sigmaN / pdf;
+                        r_l *= Tm * sigmaMaj / pdf;
+                    }
+                    return bool(beta) && bool(r_u);
+                });
+            if (terminated || !beta || !r_u) return L;
+            if (scattered) {
+                // Roulette on the MIS-weighted throughput.
+                const SampledSpectrum rrBeta = beta * etaScale / r_u.average();
+                if (rrBeta.maxComponent() < 1 && depth > 1) {
+                    const double q = std::max(0.0, 1.0 - rrBeta.maxComponent());
+                    if (rng.uniform() < q) return L;
+                    beta /= 1.0 - q;
+                }
+                continue;
+            }
+            beta *= T_maj / T_maj[0];
+            r_u *= T_maj / T_maj[0];
+            r_l *= T_maj / T_maj[0];
+        }
+
+        if (!hit) break;  // no environment light
+        const ShapeInfo& shape = scene_.shapes[hit->shape];
+        if (shape.areaLight != kNone) {
+            const auto& light = std::get<AreaLight>(scene_.lights[static_cast<size_t>(shape.areaLight)]);
+            const SampledSpectrum Le = lights_.emitted(light, hit->n, -ray.d, wl);
+            if (Le) {
+                if (depth == 0 || specularBounce) L += beta * Le / r_u.average();
+                else {
+                    const double lightPdf = lights_.pdf(prevScatter, hit->shape, hit->p, hit->n);
+                    L += beta * Le / (r_u + r_l * lightPdf).average();
+                }
+            }
+        }
+        if (shape.material == kNone) {
+            if (!shape.isInterface) break;  // black emitter or absorber
+            medium = mediumAfterCrossing(shape, hit->n, ray.d, medium);
+            ray.o = offsetAlong(hit->p, hit->n, ray.d);
+            continue;
+        }
+        if (++depth >= scene_.render.maxDepth) {
+            ++stats.truncated;
+            break;
+        }
+        ++stats.surfaceBounces;
+        const Material& mat = *scene_.materials[static_cast<size_t>(shape.material)];
+        // Opaque surfaces are two-sided; interfaces keep their outward orientation.
+        const Vec3 n = shape.isInterface ? hit->n : faceForward(hit->n, -ray.d);
+        const double eta = scene_.ior(shape.insideMedium) / scene_.ior(shape.outsideMedium);
+        const Frame frame = Frame::fromNormal(n);
+        const Vec3 wo = frame.toLocal(-ray.d);
+        if (wo.z == 0) break;
+
+        if (!mat.isSpecular()) {
+            L += directLight(
+                hit->p, medium, r_u,
+                [&](const Vec3& wi) {
+                    const Vec3 wiLocal = frame.toLocal(wi);
+                    const SampledSpectrum f = mat.f(wo, wiLocal, wl, eta, TransportMode::Radiance) * std::abs(wiLocal.z);
+                    return std::pair{f, mat.pdf(wo, wiLocal, eta)};
+                },
+                n, &shape);
+        }
+
+        const auto bs = mat.sample(wo, rng.uniform(), rng.uniform(), rng.uniform(), wl, eta, TransportMode::Radiance);
+        if (!bs) break;
+        const Vec3 wi = frame.toWorld(bs->wi);
+        beta *= bs->f * std::abs(bs->wi.z) / bs->pdf;
+        r_l = r_u / bs->pdf;
+        specularBounce = bs->specular;
+        if (bs->transmission) etaScale *= sqr(bs->etap);
+        prevScatter = hit->p;
+        medium = mediumAfterCrossing(shape, hit->n, wi, medium);
+        ray = Ray{offsetAlong(hit->p, n, wi), wi};
+        if (!beta) break;
+
+        const SampledSpectrum rrBeta = beta * etaScale / r_u.average();
+        if (rrBeta.maxComponent() < 1 && depth > 1) {
+            const double q = std::max(0.0, 1.0 - rrBeta.maxComponent());
+            if (rng.uniform() < q) break;
+            beta /= 1.0 - q;
+        }
+    }
+    return L;
+}
+
+}  // namespace fluorosim

@@ -1,0 +1,88 @@
+#include "render/renderer.h"
+
+#include <chrono>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "core/errors.h"
+#include "core/parallel.h"
+#include "spectral/wavelength_sampler.h"
+
+namespace fluorosim {
+
+void RenderOptions::validate() const {
+    if (spp <= 0 || spp > (1 << 24)) throw ConfigError("--spp: must lie in [1, 16777216], got " + std::to_string(spp));
+    if (threads < 0 || threads > 4096) throw ConfigError("--threads: must lie in [0, 4096], got " + std::to_string(threads));
+    if (sppPerPass <= 0) throw ConfigError("spp per pass must be positive, got " + std::to_string(sppPerPass));
+}
+
+Ray cameraRay(const Camera& camera, int x, int y, double u1, double u2) {
+    const double aspect = static_cast<double>(camera.width) / camera.height;
+    const double sx = (2.0 * (x + u1) / camera.width - 1.0) * camera.tanHalfFovY * aspect;
+    const double sy = (1.0 - 2.0 * (y + u2) / camera.height) * camera.tanHalfFovY;
+    return Ray{camera.position, normalize(camera.frame.n + camera.frame.s * sx + camera.frame.t * sy)};
+}
+
+RenderSummary render(const Scene& scene, Film& film, const RenderOptions& options) {
+    options.validate();
+    const auto start = std::chrono::steady_clock::now();
+    const PathTracer tracer(scene);
+    std::vector<double> lines;
+    bool continuous = false;
+    for (const Light& light : scene.lights) {
+        const Spectrum& s = std::visit(
+            [](const auto& l) -> const Spectrum& {
+                using T = std::decay_t<decltype(l)>;
+                if constexpr (std::is_same_v<T, AreaLight>) return l.emission.radiance;
+                else return l.intensity;
+            },
+            light);
+        for (const SpectralLine& line : s.spectralLines()) lines.push_back(line.lambdaNm);
+        continuous = continuous || s.hasContinuousPart();
+    }
+    const WavelengthSampler wavelengths(scene.spectral.lambdaMin, scene.spectral.lambdaMax, lines, continuous);
+
+    const Camera& cam = scene.camera;
+    const int rows = cam.height;
+    RenderSummary summary;
+    std::vector<PathStats> rowStats(static_cast<size_t>(rows));
+    std::mutex progressMutex;
+    const double totalWork = static_cast<double>(options.spp) * rows;
+    double workDone = 0;
+
+    for (int passStart = 0; passStart < options.spp; passStart += options.sppPerPass) {
+        if (options.cancel && options.cancel->load()) {
+            summary.cancelled = true;
+            break;
+        }
+        const int passEnd = std::min(options.spp, passStart + options.sppPerPass);
+        parallelFor(static_cast<size_t>(rows), options.threads, [&](size_t row) {
+            const int y = static_cast<int>(row);
+            PathStats& stats = rowStats[row];
+            for (int x = 0; x < cam.width; ++x) {
+                const uint64_t pixel = static_cast<uint64_t>(y) * static_cast<uint64_t>(cam.width) + static_cast<uint64_t>(x);
+                for (int s = passStart; s < passEnd; ++s) {
+                    Rng rng = Rng::forKey(options.seed, pixel, static_cast<uint64_t>(s));
+                    const SampledWavelengths wl = wavelengths.sample(rng.uniform(), rng.uniform());
+                    const Ray ray = cameraRay(cam, x, y, rng.uniform(), rng.uniform());
+                    const SampledSpectrum L = tracer.radiance(ray, cam.medium, wl, rng, stats);
+                    film.addSample(x, y, L, wl);
+                }
+            }
+            if (options.progress) {
+                std::lock_guard<std::mutex> lock(progressMutex);
+                workDone += passEnd - passStart;
+                options.progress(workDone / totalWork);
+            }
+        });
+        summary.sppCompleted = passEnd;
+        if (options.passFinished) options.passFinished(film, passEnd);
+    }
+    for (const PathStats& s : rowStats) summary.stats.add(s);
+    summary.nonFiniteSamples = film.nonFiniteSamples();
+    summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return summary;
+}
+
+}  // namespace fluorosim

@@ -1,0 +1,37 @@
+#pragma once
+// Drives the path tracer over the image in passes. Random streams are keyed on (seed, pixel,
+// sample index), so the image does not depend on the thread count, and a cancelled run keeps every
+// finished pass.
+#include <atomic>
+#include <functional>
+
+#include "render/film.h"
+#include "render/path_tracer.h"
+
+namespace fluorosim {
+
+struct RenderOptions {
+    int spp = 16;
+    int threads = 0;        // 0 = all cores
+    uint64_t seed = 1;
+    int sppPerPass = 1;     // granularity of cancellation and checkpoints
+    const std::atomic<bool>* cancel = nullptr;
+    std::function<void(double fractionDone)> progress;            // called from one thread at a time
+    std::function<void(const Film&, int sppDone)> passFinished;   // e.g. checkpoint writing
+    void validate() const;  // throws ConfigError
+};
+
+struct RenderSummary {
+    int sppCompleted = 0;
+    double seconds = 0;
+    PathStats stats;
+    uint64_t nonFiniteSamples = 0;
+    bool cancelled = false;
+};
+
+RenderSummary render(const Scene& scene, Film& film, const RenderOptions& options);
+
+// Primary ray through pixel (x, y) jittered by (u1, u2).
+Ray cameraRay(const Camera& camera, int x, int y, double u1, double u2);
+
+}  // namespace fluorosim

@@ -1,0 +1,94 @@
+#include "scene/light_sampler.h"
+
+#include <algorithm>
+
+#include "core/math.h"
+#include "core/sampling.h"
+
+namespace fluorosim {
+namespace {
+
+double smoothStep(double x, double a, double b) {
+    if (a == b) return x < a ? 0.0 : 1.0;
+    const double t = std::clamp((x - a) / (b - a), 0.0, 1.0);
+    return t * t * (3 - 2 * t);
+}
+
+}  // namespace
+
+SampledSpectrum LightSampler::emitted(const AreaLight& light, const Vec3& n, const Vec3& w, const SampledWavelengths& wl) const {
+    if (!light.emission.twoSided && dot(n, w) <= 0) return SampledSpectrum(0.0);
+    return light.emission.radiance.sampleEmission(wl);
+}
+
+std::optional<LightSample> LightSampler::sample(const Vec3& ref, double uLight, double u1, double u2,
+                                                const SampledWavelengths& wl) const {
+    const size_t count = scene_.lights.size();
+    if (count == 0) return std::nullopt;
+    const size_t index = std::min(count - 1, static_cast<size_t>(uLight * static_cast<double>(count)));
+    const double selectPdf = 1.0 / static_cast<double>(count);
+    const Light& light = scene_.lights[index];
+    LightSample ls;
+    if (const auto* pl = std::get_if<PointLight>(&light)) {
+        ls.p = pl->position;
+        const Vec3 d = ls.p - ref;
+        ls.distance = length(d);
+        if (!(ls.distance > 0)) return std::nullopt;
+        ls.wi = d / ls.distance;
+        ls.L = pl->intensity.sampleEmission(wl) / sqr(ls.distance);
+        ls.pdf = selectPdf;
+        ls.delta = true;
+        return ls;
+    }
+    if (const auto* sl = std::get_if<SpotLight>(&light)) {
+        ls.p = sl->position;
+        const Vec3 d = ls.p - ref;
+        ls.distance = length(d);
+        if (!(ls.distance > 0)) return std::nullopt;
+        ls.wi = d / ls.distance;
+        const double cosTheta = dot(-ls.wi, sl->direction);
+        const double falloff = smoothStep(cosTheta, sl->cosTotalWidth, sl->cosFalloffStart);
+        ls.L = sl->intensity.sampleEmission(wl) * (falloff / sqr(ls.distance));
+        ls.pdf = selectPdf;
+        ls.delta = true;
+        return ls;
+    }
+    const auto& al = std::get<AreaLight>(light);
+    ls.shape = al.shape;
+    if (scene_.geometry.isSphere(al.shape)) {
+        const Vec3 c = scene_.geometry.sphereCenter(al.shape);
+        const double r = scene_.geometry.sphereRadius(al.shape);
+        ls.n = sampleUniformSphere(u1, u2);
+        ls.p = c + ls.n * r;
+    } else {
+        const TriangleMesh& m = scene_.geometry.mesh(al.shape);
+        const auto it = std::lower_bound(al.triangleCdf.begin(), al.triangleCdf.end(), u1);
+        const size_t tri = std::min(static_cast<size_t>(it - al.triangleCdf.begin()), al.triangleCdf.size() - 1);
+        const double lo = tri == 0 ? 0.0 : al.triangleCdf[tri - 1];
+        const double uRemap = std::clamp((u1 - lo) / std::max(al.triangleCdf[tri] - lo, 1e-300), 0.0, 1.0);
+        const auto b = sampleUniformTriangle(uRemap, u2);
+        const Vec3 &a = m.positions[m.indices[3 * tri]], &bb = m.positions[m.indices[3 * tri + 1]],
+                   &cc = m.positions[m.indices[3 * tri + 2]];
+        ls.p = a * b[0] + bb * b[1] + cc * (1 - b[0] - b[1]);
+        ls.n = normalize(cross(bb - a, cc - a));
+    }
+    const Vec3 d = ls.p - ref;
+    ls.distance = length(d);
+    if (!(ls.distance > 0)) return std::nullopt;
+    ls.wi = d / ls.distance;
+    const double cosLight = std::abs(dot(ls.n, ls.wi));
+    if (cosLight <= 0) return std::nullopt;
+    ls.L = emitted(al, ls.n, -ls.wi, wl);
+    ls.pdf = selectPdf * sqr(ls.distance) / (scene_.geometry.area(al.shape) * cosLight);
+    return ls;
+}
+
+double LightSampler::pdf(const Vec3& ref, uint32_t shape, const Vec3& pLight, const Vec3& nLight) const {
+    const Vec3 d = pLight - ref;
+    const double dist2 = dot(d, d);
+    const double cosLight = std::abs(dot(nLight, d)) / std::sqrt(dist2);
+    if (cosLight <= 0) return 0.0;
+    return dist2 / (scene_.geometry.area(shape) * cosLight) / static_cast<double>(scene_.lights.size());
+}
+
+}  // namespace fluorosim

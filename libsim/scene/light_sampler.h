@@ -1,0 +1,34 @@
+#pragma once
+// Next-event estimation: picks a light uniformly and a point on it; evaluates the solid-angle pdf
+// of the same strategy for MIS when a path hits an emitter.
+#include <optional>
+
+#include "scene/scene.h"
+
+namespace fluorosim {
+
+struct LightSample {
+    Vec3 p;             // point on the light
+    Vec3 n;             // its normal (zero for point lights)
+    Vec3 wi;            // unit direction from the reference point to the light
+    double distance = 0;
+    SampledSpectrum L;  // incident radiance (area) or intensity / distance^2 (delta lights)
+    double pdf = 0;     // solid-angle pdf including light selection, or selection probability for delta lights
+    bool delta = false;
+    uint32_t shape = 0;
+};
+
+class LightSampler {
+public:
+    explicit LightSampler(const Scene& scene) : scene_(scene) {}
+    std::optional<LightSample> sample(const Vec3& ref, double uLight, double u1, double u2, const SampledWavelengths& wl) const;
+    // Solid-angle pdf of sampling point `pLight` (normal nLight) on the area light of `shape` from `ref`.
+    double pdf(const Vec3& ref, uint32_t shape, const Vec3& pLight, const Vec3& nLight) const;
+    // Radiance leaving an area light at a point with normal n towards direction w.
+    SampledSpectrum emitted(const AreaLight& light, const Vec3& n, const Vec3& w, const SampledWavelengths& wl) const;
+
+private:
+    const Scene& scene_;
+};
+
+}  // namespace fluorosim

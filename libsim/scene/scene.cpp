@@ -1,0 +1,29 @@
+#include "scene/scene.h"
+
+#include "core/errors.h"
+
+namespace fluorosim {
+
+void Scene::addAreaLight(uint32_t shape, AreaEmission emission) {
+    AreaLight light{shape, std::move(emission), {}};
+    if (!geometry.isSphere(shape)) {
+        const TriangleMesh& m = geometry.mesh(shape);
+        double sum = 0;
+        for (size_t t = 0; t < m.indices.size(); t += 3) {
+            const Vec3 &a = m.positions[m.indices[t]], &b = m.positions[m.indices[t + 1]], &c = m.positions[m.indices[t + 2]];
+            sum += 0.5 * length(cross(b - a, c - a));
+            light.triangleCdf.push_back(sum);
+        }
+        if (!(sum > 0)) throw ConfigError("shape \"" + shapes[shape].name + "\": an area light needs a non-zero area");
+        for (double& v : light.triangleCdf) v /= sum;
+    }
+    shapes[shape].areaLight = static_cast<int>(lights.size());
+    lights.emplace_back(std::move(light));
+}
+
+void Scene::finalize() {
+    if (shapes.size() != geometry.shapeCount()) throw Error("scene: shape table and geometry disagree");
+    geometry.commit();
+}
+
+}  // namespace fluorosim

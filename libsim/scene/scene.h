@@ -1,0 +1,86 @@
+#pragma once
+// The in-memory scene: geometry, what each shape is (material, media on each side, emission),
+// lights, camera and the sampled wavelength range. Built by scene_loader or directly in code.
+#include <memory>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "geometry/geometry.h"
+#include "materials/material.h"
+#include "media/medium.h"
+#include "spectral/spectrum.h"
+
+namespace fluorosim {
+
+inline constexpr int kNone = -1;
+
+struct AreaEmission {
+    Spectrum radiance;  // spectral radiance, W m^-2 sr^-1 nm^-1 (or power per line)
+    bool twoSided = false;
+};
+
+struct ShapeInfo {
+    std::string name;
+    int material = kNone;        // kNone: a pure interface (or a black emitter)
+    int insideMedium = kNone;    // media on the side opposite / along the outward normal;
+    int outsideMedium = kNone;   // kNone on both sides means the shape is not an interface
+    bool isInterface = false;
+    int areaLight = kNone;       // index into Scene::lights
+};
+
+struct AreaLight {
+    uint32_t shape;
+    AreaEmission emission;
+    std::vector<double> triangleCdf;  // area CDF for meshes, normalized
+};
+struct PointLight {
+    Vec3 position;
+    Spectrum intensity;  // W sr^-1 nm^-1
+};
+struct SpotLight {
+    Vec3 position, direction;
+    Spectrum intensity;  // on the axis
+    double cosTotalWidth, cosFalloffStart;
+};
+using Light = std::variant<AreaLight, PointLight, SpotLight>;
+
+struct Camera {
+    Vec3 position;
+    Frame frame;        // n: forward, s: right, t: up
+    double tanHalfFovY = 0.5;
+    int width = 64, height = 64;
+    int medium = kNone;
+};
+
+struct SpectralSettings {
+    double lambdaMin = 300, lambdaMax = 800;  // nm
+    double binWidth = 10;                     // nm, spectral EXR channels
+};
+
+struct RenderSettings {
+    int spp = 16;
+    int maxDepth = 100000;  // a safety cap; paths that hit it are counted, never silently
+    uint64_t seed = 1;
+};
+
+struct Scene {
+    Geometry geometry;
+    std::vector<ShapeInfo> shapes;  // indexed by shape id
+    std::vector<std::unique_ptr<Material>> materials;
+    std::vector<std::string> materialNames;
+    std::vector<HomogeneousMedium> media;
+    std::vector<Light> lights;
+    Camera camera;
+    SpectralSettings spectral;
+    RenderSettings render;
+
+    // Refractive index on each side of an interface (1 where no medium is given).
+    double ior(int medium) const { return medium == kNone ? 1.0 : media[static_cast<size_t>(medium)].ior(); }
+    // Adds an area light on an existing shape.
+    void addAreaLight(uint32_t shape, AreaEmission emission);
+    // Finishes construction: commits geometry and checks consistency. Throws ConfigError.
+    void finalize();
+};
+
+}  // namespace fluorosim

@@ -1,0 +1,464 @@
+#include "scene/scene_loader.h"
+
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+
+#include "core/errors.h"
+#include "core/math.h"
+#include "core/units.h"
+
+namespace fluorosim {
+namespace {
+
+using json = nlohmann::json;
+namespace fs = std::filesystem;
+
+std::string shortDump(const json& j) {
+    std::string s = j.dump();
+    return s.size() > 80 ? s.substr(0, 77) + "..." : s;
+}
+
+// A JSON value with its path, so every error names file, field and value.
+class Node {
+public:
+    Node(const json& j, std::string path, const fs::path& file) : j_(j), path_(std::move(path)), file_(file) {}
+    const json& raw() const { return j_; }
+    const std::string& path() const { return path_; }
+
+    [[noreturn]] void fail(const std::string& what) const {
+        throw ConfigError(file_.string() + ": " + (path_.empty() ? "/" : path_) + ": " + what + " (got " + shortDump(j_) + ")");
+    }
+    bool has(const std::string& key) const { return j_.is_object() && j_.contains(key); }
+    Node at(const std::string& key) const {
+        if (!j_.is_object()) fail("expected an object");
+        if (!j_.contains(key)) fail("missing required field \"" + key + "\"");
+        return Node(j_.at(key), path_ + "/" + key, file_);
+    }
+    Node at(size_t i) const { return Node(j_.at(i), path_ + "/" + std::to_string(i), file_); }
+    size_t size() const { return j_.size(); }
+    void requireObject() const {
+        if (!j_.is_object()) fail("expected an object");
+    }
+    void allowOnly(std::initializer_list<const char*> keys) const {
+        requireObject();
+        std::set<std::string> allowed(keys.begin(), keys.end());
+        for (auto it = j_.begin(); it != j_.end(); ++it)
+            if (!allowed.count(it.key())) {
+                std::string list;
+                for (const auto& k : allowed) list += (list.empty() ? "" : ", ") + k;
+                Node(it.value(), path_ + "/" + it.key(), file_).fail("unknown field \"" + it.key() + "\" (allowed: " + list + ")");
+            }
+    }
+    double number() const {
+        if (!j_.is_number()) fail("expected a number");
+        const double v = j_.get<double>();
+        if (!std::isfinite(v)) fail("expected a finite number");
+        return v;
+    }
+    double number(double lo, double hi, bool openLo = false, bool openHi = false) const {
+        const double v = number();
+        if (v < lo || v > hi || (openLo && v == lo) || (openHi && v == hi))
+            fail("must lie in " + std::string(openLo ? "(" : "[") + fmt(lo) + ", " + fmt(hi) + (openHi ? ")" : "]"));
+        return v;
+    }
+    int integer(int lo, int hi) const {
+        if (!j_.is_number_integer()) fail("expected an integer");
+        const auto v = j_.get<int64_t>();
+        if (v < lo || v > hi) fail("must lie in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
+        return static_cast<int>(v);
+    }
+    std::string str() const {
+        if (!j_.is_string()) fail("expected a string");
+        return j_.get<std::string>();
+    }
+    bool boolean() const {
+        if (!j_.is_boolean()) fail("expected true or false");
+        return j_.get<bool>();
+    }
+    double quantity(Dimension dim) const {
+        if (!j_.is_string()) fail(std::string("expected a string with a unit, ") + dimensionName(dim));
+        try {
+            return parseQuantity(j_.get<std::string>(), dim, "value");
+        } catch (const ConfigError& e) {
+            fail(e.what());
+        }
+    }
+    double positiveQuantity(Dimension dim) const {
+        const double v = quantity(dim);
+        if (!(v > 0)) fail("must be positive");
+        return v;
+    }
+    // ["1 mm", "2 mm", "3 mm"] or {"value": [1, 2, 3], "unit": "mm"}; dimensionless: [0, 1, 0].
+    Vec3 vec3(Dimension dim) const {
+        if (j_.is_object()) {
+            allowOnly({"value", "unit"});
+            const Node v = at("value");
+            const std::string unit = at("unit").str();
+            const auto scale = unitScale(unit, dim);
+            if (!scale) at("unit").fail(std::string("unit does not fit ") + dimensionName(dim));
+            if (!v.raw().is_array() || v.size() != 3) v.fail("expected 3 numbers");
+            return Vec3(v.at(0).number(), v.at(1).number(), v.at(2).number()) * *scale;
+        }
+        if (!j_.is_array() || j_.size() != 3) fail("expected an array of 3 values");
+        Vec3 r;
+        for (size_t i = 0; i < 3; ++i) r[static_cast<int>(i)] = dim == Dimension::Dimensionless ? at(i).number() : at(i).quantity(dim);
+        return r;
+    }
+
+private:
+    static std::string fmt(double v) {
+        std::ostringstream os;
+        os << v;
+        return os.str();
+    }
+    const json& j_;
+    std::string path_;
+    const fs::path& file_;
+};
+
+enum class SpectrumKind { Reflectance, Coefficient, Emission, Unitless };
+
+class Loader {
+public:
+    Loader(const fs::path& file, const SpectrumResolver& resolve) : file_(file), resolve_(resolve) {
+        baseDir_ = file.has_parent_path() ? file.parent_path() : fs::path(".");
+    }
+
+    Scene load(const json& root) {
+        const Node r(root, "", file_);
+        r.allowOnly({"fluorosim_scene", "description", "spectral", "render", "camera", "media", "materials", "shapes", "lights"});
+        if (r.at("fluorosim_scene").integer(1, 1000) != 1) r.at("fluorosim_scene").fail("unsupported scene format version (this build reads 1)");
+        Scene scene;
+        if (r.has("spectral")) loadSpectral(r.at("spectral"), scene);
+        if (r.has("render")) loadRender(r.at("render"), scene);
+        if (r.has("media")) loadMedia(r.at("media"), scene);
+        if (r.has("materials")) loadMaterials(r.at("materials"), scene);
+        loadShapes(r.at("shapes"), scene);
+        if (r.has("lights")) loadLights(r.at("lights"), scene);
+        if (scene.lights.empty()) r.fail("the scene has no light (add an \"emission\" to a shape or a \"lights\" entry)");
+        loadCamera(r.at("camera"), scene);
+        scene.finalize();
+        return scene;
+    }
+
+private:
+    void loadSpectral(const Node& n, Scene& scene) {
+        n.allowOnly({"range", "bin_width"});
+        if (n.has("range")) {
+            const Node range = n.at("range");
+            if (!range.raw().is_array() || range.size() != 2) range.fail("expected [min, max], e.g. [\"300 nm\", \"800 nm\"]");
+            const double lo = range.at(0).quantity(Dimension::Wavelength), hi = range.at(1).quantity(Dimension::Wavelength);
+            if (!(lo >= 100 && hi <= 20000 && lo < hi)) range.fail("wavelength range must satisfy 100 nm <= min < max <= 20000 nm");
+            scene.spectral.lambdaMin = lambdaMin_ = lo;
+            scene.spectral.lambdaMax = lambdaMax_ = hi;
+        }
+        if (n.has("bin_width")) {
+            const double w = n.at("bin_width").positiveQuantity(Dimension::Wavelength);
+            if ((scene.spectral.lambdaMax - scene.spectral.lambdaMin) / w > 4000) n.at("bin_width").fail("too many spectral bins (over 4000)");
+            scene.spectral.binWidth = w;
+        }
+    }
+
+    void loadRender(const Node& n, Scene& scene) {
+        n.allowOnly({"spp", "max_depth", "seed"});
+        if (n.has("spp")) scene.render.spp = n.at("spp").integer(1, 1 << 24);
+        if (n.has("max_depth")) scene.render.maxDepth = n.at("max_depth").integer(1, 100000000);
+        if (n.has("seed")) scene.render.seed = static_cast<uint64_t>(n.at("seed").integer(0, 2147483647));
+    }
+
+    Spectrum spectrum(const Node& n, SpectrumKind kind) {
+        const bool coefficient = kind == SpectrumKind::Coefficient;
+        if (n.raw().is_number()) {
+            if (coefficient) n.fail("a coefficient needs a unit, e.g. \"0.5 /mm\"");
+            return checked(n, Spectrum::constant(n.number()), kind);
+        }
+        if (n.raw().is_string()) {
+            const std::string s = n.str();
+            if (coefficient && !s.empty() && (std::isdigit(static_cast<unsigned char>(s[0])) || s[0] == '.' || s[0] == '-' || s[0] == '+'))
+                return checked(n, Spectrum::constant(n.quantity(Dimension::InverseLength)), kind);
+            return checked(n, Spectrum::tabulated(resolveNamed(n, s)), kind);
+        }
+        if (!n.raw().is_object()) n.fail("expected a number, a quantity, a spectrum name or a spectrum object");
+        if (n.has("lines")) {
+            n.allowOnly({"lines"});
+            if (kind != SpectrumKind::Emission) n.fail("spectral lines are only allowed in emission spectra");
+            const Node lines = n.at("lines");
+            if (!lines.raw().is_array() || lines.size() == 0) lines.fail("expected a non-empty array of lines");
+            std::vector<SpectralLine> out;
+            for (size_t i = 0; i < lines.size(); ++i) {
+                const Node l = lines.at(i);
+                l.allowOnly({"wavelength", "power"});
+                const double lambda = l.at("wavelength").positiveQuantity(Dimension::Wavelength);
+                const double power = l.at("power").number(0, 1e30);
+                if (lambda < lambdaMin() || lambda > lambdaMax())
+                    l.at("wavelength").fail("line lies outside the spectral range [" + std::to_string(lambdaMin()) + ", " +
+                                            std::to_string(lambdaMax()) + "] nm");
+                out.push_back({lambda, power});
+            }
+            return Spectrum::lines(std::move(out));
+        }
+        n.allowOnly({"reference", "tabulated", "scale", "unit"});
+        double scale = n.has("scale") ? n.at("scale").number(0, 1e30) : 1.0;
+        if (coefficient) {
+            const std::string unit = n.at("unit").str();
+            const auto s = unitScale(unit, Dimension::InverseLength);
+            if (!s) n.at("unit").fail("expected an inverse length unit such as \"/mm\"");
+            scale *= *s;
+        } else if (n.has("unit")) {
+            n.at("unit").fail("\"unit\" is only used for coefficients");
+        }
+        TabulatedSpectrum table;
+        if (n.has("reference") == n.has("tabulated")) n.fail("give exactly one of \"reference\" and \"tabulated\"");
+        if (n.has("reference")) table = resolveNamed(n.at("reference"), n.at("reference").str());
+        else {
+            const Node t = n.at("tabulated");
+            t.allowOnly({"wavelength_nm", "values"});
+            std::vector<double> l, v;
+            const Node ln = t.at("wavelength_nm"), vn = t.at("values");
+            if (!ln.raw().is_array() || !vn.raw().is_array() || ln.size() != vn.size())
+                t.fail("\"wavelength_nm\" and \"values\" must be arrays of equal length");
+            for (size_t i = 0; i < ln.size(); ++i) {
+                l.push_back(ln.at(i).number());
+                v.push_back(vn.at(i).number());
+            }
+            try {
+                table = TabulatedSpectrum(l, v, "tabulated spectrum");
+            } catch (const ConfigError& e) {
+                t.fail(e.what());
+            }
+        }
+        return checked(n, Spectrum::tabulated(std::move(table), scale), kind);
+    }
+
+    TabulatedSpectrum resolveNamed(const Node& n, const std::string& ref) {
+        try {
+            return resolve_(ref, baseDir_);
+        } catch (const Error& e) {
+            n.fail(e.what());
+        }
+    }
+
+    Spectrum checked(const Node& n, Spectrum s, SpectrumKind kind) {
+        const double maxV = s.maxValue();
+        if (!std::isfinite(maxV) || maxV < 0)
+            n.fail("spectrum values must be finite and non-negative");
+        if (kind == SpectrumKind::Reflectance && maxV > 1.0) n.fail("a reflectance must not exceed 1");
+        return s;
+    }
+
+    double lambdaMin() const { return lambdaMin_; }
+    double lambdaMax() const { return lambdaMax_; }
+
+    void loadMedia(const Node& n, Scene& scene) {
+        n.requireObject();
+        for (auto it = n.raw().begin(); it != n.raw().end(); ++it) {
+            const Node m(it.value(), n.path() + "/" + it.key(), file_);
+            m.allowOnly({"sigma_a", "sigma_s", "g", "ior"});
+            const Spectrum sa = m.has("sigma_a") ? spectrum(m.at("sigma_a"), SpectrumKind::Coefficient) : Spectrum::constant(0);
+            const Spectrum ss = m.has("sigma_s") ? spectrum(m.at("sigma_s"), SpectrumKind::Coefficient) : Spectrum::constant(0);
+            const double g = m.has("g") ? m.at("g").number(-1, 1, true, true) : 0.0;
+            const double ior = m.has("ior") ? m.at("ior").number(1, 10) : 1.0;
+            mediumIndex_[it.key()] = static_cast<int>(scene.media.size());
+            scene.media.emplace_back(it.key(), sa, ss, g, ior);
+        }
+    }
+
+    void loadMaterials(const Node& n, Scene& scene) {
+        n.requireObject();
+        for (auto it = n.raw().begin(); it != n.raw().end(); ++it) {
+            const Node m(it.value(), n.path() + "/" + it.key(), file_);
+            const std::string type = m.at("type").str();
+            std::unique_ptr<Material> mat;
+            if (type == "diffuse") {
+                m.allowOnly({"type", "reflectance"});
+                mat = makeDiffuse(spectrum(m.at("reflectance"), SpectrumKind::Reflectance));
+            } else if (type == "plastic") {
+                m.allowOnly({"type", "diffuse", "ior", "roughness"});
+                mat = makePlastic(spectrum(m.at("diffuse"), SpectrumKind::Reflectance), m.has("ior") ? m.at("ior").number(1, 10, true) : 1.5,
+                                  m.has("roughness") ? m.at("roughness").number(0, 1) : 0.1);
+            } else if (type == "conductor") {
+                m.allowOnly({"type", "eta", "k", "roughness"});
+                mat = makeConductor(spectrum(m.at("eta"), SpectrumKind::Unitless), spectrum(m.at("k"), SpectrumKind::Unitless),
+                                    m.has("roughness") ? m.at("roughness").number(0, 1) : 0.0);
+            } else if (type == "dielectric") {
+                m.allowOnly({"type", "roughness"});
+                mat = makeDielectric(m.has("roughness") ? m.at("roughness").number(0, 1) : 0.0);
+                dielectrics_.insert(it.key());
+            } else {
+                m.at("type").fail("unknown material type (known: diffuse, plastic, conductor, dielectric)");
+            }
+            materialIndex_[it.key()] = static_cast<int>(scene.materials.size());
+            scene.materials.push_back(std::move(mat));
+            scene.materialNames.push_back(it.key());
+        }
+    }
+
+    int mediumRef(const Node& n) const {
+        const std::string name = n.str();
+        const auto it = mediumIndex_.find(name);
+        if (it == mediumIndex_.end()) n.fail("unknown medium \"" + name + "\"" + known(mediumIndex_));
+        return it->second;
+    }
+
+    template <class Map>
+    static std::string known(const Map& m) {
+        std::string s;
+        for (const auto& [k, v] : m) s += (s.empty() ? "" : ", ") + k;
+        return s.empty() ? " (none defined)" : " (defined: " + s + ")";
+    }
+
+    void loadShapes(const Node& n, Scene& scene) {
+        if (!n.raw().is_array() || n.size() == 0) n.fail("expected a non-empty array of shapes");
+        for (size_t i = 0; i < n.size(); ++i) {
+            const Node s = n.at(i);
+            const std::string type = s.at("type").str();
+            uint32_t id = 0;
+            try {
+                if (type == "sphere") {
+                    s.allowOnly({"type", "name", "center", "radius", "material", "interior", "exterior", "emission"});
+                    id = scene.geometry.addSphere(s.at("center").vec3(Dimension::Length), s.at("radius").positiveQuantity(Dimension::Length));
+                } else if (type == "quad") {
+                    s.allowOnly({"type", "name", "origin", "edge1", "edge2", "material", "interior", "exterior", "emission"});
+                    const Vec3 o = s.at("origin").vec3(Dimension::Length), e1 = s.at("edge1").vec3(Dimension::Length),
+                               e2 = s.at("edge2").vec3(Dimension::Length);
+                    if (!(length(cross(e1, e2)) > 0)) s.fail("quad has zero area");
+                    id = scene.geometry.addMesh(TriangleMesh{{o, o + e1, o + e1 + e2, o + e2}, {0, 1, 2, 0, 2, 3}});
+                } else if (type == "mesh") {
+                    s.allowOnly({"type", "name", "file", "unit", "translate", "material", "interior", "exterior", "emission"});
+                    fs::path f = s.at("file").str();
+                    if (f.is_relative()) f = baseDir_ / f;
+                    const auto scale = unitScale(s.at("unit").str(), Dimension::Length);
+                    if (!scale) s.at("unit").fail("expected a length unit for the file's coordinates, e.g. \"mm\"");
+                    TriangleMesh mesh = loadMesh(f.string());
+                    const Vec3 offset = s.has("translate") ? s.at("translate").vec3(Dimension::Length) : Vec3();
+                    for (Vec3& p : mesh.positions) p = p * *scale + offset;
+                    id = scene.geometry.addMesh(std::move(mesh));
+                } else {
+                    s.at("type").fail("unknown shape type (known: sphere, quad, mesh)");
+                }
+            } catch (const ConfigError& e) {
+                if (std::string(e.what()).find(file_.string()) == 0) throw;
+                s.fail(e.what());
+            } catch (const IoError& e) {
+                s.at("file").fail(e.what());
+            }
+            ShapeInfo info;
+            info.name = s.has("name") ? s.at("name").str() : type + " " + std::to_string(i);
+            const bool interface = s.has("interior") || s.has("exterior");
+            info.isInterface = interface;
+            if (interface) {
+                info.insideMedium = s.has("interior") ? mediumRef(s.at("interior")) : kNone;
+                info.outsideMedium = s.has("exterior") ? mediumRef(s.at("exterior")) : kNone;
+            }
+            if (s.has("material")) {
+                const Node mn = s.at("material");
+                const auto it = materialIndex_.find(mn.str());
+                if (it == materialIndex_.end()) mn.fail("unknown material \"" + mn.str() + "\"" + known(materialIndex_));
+                const bool dielectric = dielectrics_.count(mn.str()) > 0;
+                if (interface && !dielectric) mn.fail("a shape with interior/exterior media must use a dielectric material or none");
+                if (!interface && dielectric) mn.fail("a dielectric needs \"interior\" and/or \"exterior\" media (their ior set the index ratio)");
+                info.material = it->second;
+            } else if (interface && scene.ior(info.insideMedium) != scene.ior(info.outsideMedium)) {
+                // Index mismatch with no material given: a smooth dielectric interface.
+                info.material = static_cast<int>(scene.materials.size());
+                scene.materials.push_back(makeDielectric(0.0));
+                scene.materialNames.push_back("(smooth interface)");
+            } else if (!interface && !s.has("emission")) {
+                s.fail("a shape needs a \"material\", or \"interior\"/\"exterior\" media, or an \"emission\"");
+            }
+            scene.shapes.push_back(info);
+            if (s.has("emission")) {
+                const Node e = s.at("emission");
+                e.allowOnly({"radiance", "two_sided"});
+                AreaEmission em{spectrum(e.at("radiance"), SpectrumKind::Emission), e.has("two_sided") && e.at("two_sided").boolean()};
+                if (!(em.radiance.integral(lambdaMin(), lambdaMax()) > 0)) e.at("radiance").fail("emits no power inside the spectral range");
+                scene.addAreaLight(id, std::move(em));
+            }
+        }
+    }
+
+    void loadLights(const Node& n, Scene& scene) {
+        if (!n.raw().is_array()) n.fail("expected an array of lights");
+        for (size_t i = 0; i < n.size(); ++i) {
+            const Node l = n.at(i);
+            const std::string type = l.at("type").str();
+            if (type == "point") {
+                l.allowOnly({"type", "position", "intensity"});
+                PointLight p{l.at("position").vec3(Dimension::Length), spectrum(l.at("intensity"), SpectrumKind::Emission)};
+                requirePower(l.at("intensity"), p.intensity);
+                scene.lights.emplace_back(std::move(p));
+            } else if (type == "spot") {
+                l.allowOnly({"type", "position", "look_at", "intensity", "cone_angle_deg", "falloff_start_deg"});
+                const Vec3 pos = l.at("position").vec3(Dimension::Length);
+                const Vec3 dir = l.at("look_at").vec3(Dimension::Length) - pos;
+                if (!(length(dir) > 0)) l.at("look_at").fail("must differ from position");
+                const double cone = l.at("cone_angle_deg").number(0, 180, true, false);
+                const double falloff = l.has("falloff_start_deg") ? l.at("falloff_start_deg").number(0, cone) : cone;
+                SpotLight sp{pos, normalize(dir), spectrum(l.at("intensity"), SpectrumKind::Emission), std::cos(cone * kPi / 180),
+                             std::cos(falloff * kPi / 180)};
+                requirePower(l.at("intensity"), sp.intensity);
+                scene.lights.emplace_back(std::move(sp));
+            } else {
+                l.at("type").fail("unknown light type (known: point, spot; area lights are shapes with \"emission\")");
+            }
+        }
+    }
+
+    void requirePower(const Node& n, const Spectrum& s) const {
+        if (!(s.integral(lambdaMin(), lambdaMax()) > 0)) n.fail("emits no power inside the spectral range");
+    }
+
+    void loadCamera(const Node& n, Scene& scene) {
+        n.allowOnly({"position", "look_at", "up", "fov_y_deg", "resolution", "medium"});
+        Camera& c = scene.camera;
+        c.position = n.at("position").vec3(Dimension::Length);
+        const Vec3 forward = n.at("look_at").vec3(Dimension::Length) - c.position;
+        const Vec3 up = n.has("up") ? n.at("up").vec3(Dimension::Dimensionless) : Vec3(0, 1, 0);
+        if (!(length(forward) > 0)) n.at("look_at").fail("must differ from position");
+        const Vec3 right = cross(normalize(forward), up);
+        if (!(length(right) > 1e-9)) n.at("up").fail("must not be parallel to the viewing direction");
+        c.frame.n = normalize(forward);
+        c.frame.s = normalize(right);
+        c.frame.t = cross(c.frame.s, c.frame.n);
+        const double fov = n.at("fov_y_deg").number(0, 180, true, true);
+        c.tanHalfFovY = std::tan(0.5 * fov * kPi / 180);
+        const Node res = n.at("resolution");
+        if (!res.raw().is_array() || res.size() != 2) res.fail("expected [width, height]");
+        c.width = res.at(0).integer(1, 16384);
+        c.height = res.at(1).integer(1, 16384);
+        if (n.has("medium")) c.medium = mediumRef(n.at("medium"));
+    }
+
+    const fs::path& file_;
+    fs::path baseDir_;
+    const SpectrumResolver& resolve_;
+    std::map<std::string, int> mediumIndex_, materialIndex_;
+    std::set<std::string> dielectrics_;
+    double lambdaMin_ = 300, lambdaMax_ = 800;
+};
+
+}  // namespace
+
+Scene loadSceneFromString(const std::string& text, const fs::path& file, const SpectrumResolver& resolve) {
+    json root;
+    try {
+        root = json::parse(text);
+    } catch (const json::parse_error& e) {
+        throw ConfigError(file.string() + ": malformed JSON: " + e.what());
+    }
+    return Loader(file, resolve).load(root);
+}
+
+Scene loadScene(const fs::path& file, const SpectrumResolver& resolve) {
+    std::ifstream in(file);
+    if (!in) throw IoError(file.string() + ": cannot open scene file");
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return loadSceneFromString(ss.str(), file, resolve);
+}
+
+}  // namespace fluorosim
