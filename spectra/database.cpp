@@ -1,6 +1,7 @@
 #include "database.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cctype>
 #include <charconv>
 #include <cstdlib>
@@ -32,6 +33,12 @@ std::vector<std::string> splitCsv(const std::string& line) {
     while (std::getline(ss, cell, ',')) cells.push_back(trim(cell));
     if (!line.empty() && line.back() == ',') cells.emplace_back();
     return cells;
+}
+
+std::string numberText(double v) {
+    std::ostringstream os;
+    os << v;
+    return os.str();
 }
 
 std::string lower(std::string s) {
@@ -108,6 +115,7 @@ std::vector<TabulatedSpectrum> readSpectraCsv(const fs::path& file, const std::v
     std::vector<double> lambda;
     std::vector<std::vector<double>> values(columns.size());
     size_t row = 1;
+    auto where = [&](const std::string& col) { return file.string() + ":" + std::to_string(row) + ": column \"" + col + "\""; };
     while (std::getline(in, line)) {
         ++row;
         if (trim(line).empty() || trim(line)[0] == '#') continue;
@@ -122,8 +130,17 @@ std::vector<TabulatedSpectrum> readSpectraCsv(const fs::path& file, const std::v
                 throw ConfigError(file.string() + ":" + std::to_string(row) + ": column \"" + colName + "\" is not a number: \"" + cell + "\"");
             return v;
         };
-        lambda.push_back(number(lambdaCol, "wavelength_nm"));
-        for (size_t i = 0; i < cols.size(); ++i) values[i].push_back(number(cols[i], columns[i]));
+        const double l = number(lambdaCol, "wavelength_nm");
+        if (!std::isfinite(l) || l <= 0) throw ConfigError(where("wavelength_nm") + ": invalid wavelength " + numberText(l));
+        if (!lambda.empty() && !(l > lambda.back()))
+            throw ConfigError(where("wavelength_nm") + ": wavelengths must increase strictly, got " + numberText(l) + " nm after " +
+                              numberText(lambda.back()) + " nm");
+        lambda.push_back(l);
+        for (size_t i = 0; i < cols.size(); ++i) {
+            const double v = number(cols[i], columns[i]);
+            if (!std::isfinite(v) || v < 0) throw ConfigError(where(columns[i]) + ": negative or non-finite value " + numberText(v));
+            values[i].push_back(v);
+        }
     }
     std::vector<TabulatedSpectrum> out;
     for (size_t i = 0; i < cols.size(); ++i)
@@ -179,7 +196,8 @@ TabulatedSpectrum Database::solventAbsorption(const std::string& name) const {
 
 std::vector<std::string> Database::dyeIds() const {
     std::vector<std::string> ids;
-    for (const auto& d : loadDyeTable(dir_).at("dyes")) ids.push_back(d.at("id").get<std::string>());
+    const auto table = loadDyeTable(dir_);  // keep the table alive across the loop
+    for (const auto& d : table.at("dyes")) ids.push_back(d.at("id").get<std::string>());
     return ids;
 }
 

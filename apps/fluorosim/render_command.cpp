@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <unistd.h>
 
 #include "commands.h"
@@ -23,8 +24,9 @@ extern "C" void onSignal(int) { gCancel.store(true); }
 
 struct RenderArgs {
     std::string scene, output;
-    int spp = -1, threads = 0;
-    int64_t seed = -1;
+    std::optional<int> spp;
+    int threads = 0;
+    std::optional<uint64_t> seed;
     double checkpointSeconds = 60;
 };
 
@@ -69,9 +71,9 @@ void runRender(const RenderArgs& a) {
     checkWritable(out);
     const spectra::Database db;
     Scene scene = loadScene(a.scene, [&db](const std::string& ref, const fs::path& base) { return db.resolve(ref, base); });
-    if (a.seed >= 0) scene.render.seed = static_cast<uint64_t>(a.seed);
+    if (a.seed) scene.render.seed = *a.seed;
     RenderOptions opt;
-    opt.spp = a.spp != -1 ? a.spp : scene.render.spp;
+    opt.spp = a.spp.value_or(scene.render.spp);
     opt.validate();
     opt.threads = a.threads;
     opt.seed = scene.render.seed;

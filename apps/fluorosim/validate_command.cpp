@@ -20,15 +20,25 @@ struct SlabArgs {
 };
 
 double index(const std::string& s, const char* name) {
-    return parseQuantity(s, Dimension::Dimensionless, std::string("--") + name);
+    const double v = parseQuantity(s, Dimension::Dimensionless, std::string("--") + name);
+    if (!(v >= 1.0 && v <= 10.0)) throw ConfigError(std::string("--") + name + ": refractive index must lie in [1, 10], got \"" + s + "\"");
+    return v;
+}
+
+// Parses an option and checks its sign against the text the user typed, so messages quote it.
+double physical(const std::string& text, Dimension dim, const char* name, const char* bareUnit, bool allowZero) {
+    const double v = parseQuantity(text, dim, std::string("--") + name, bareUnit);
+    if (v < 0 || (!allowZero && v == 0))
+        throw ConfigError(std::string("--") + name + ": must be " + (allowZero ? "non-negative" : "positive") + ", got \"" + text + "\"");
+    return v;
 }
 
 void runSlab(const SlabArgs& a) {
     SlabOptions o;
     // Bare numbers follow MCML: 1/cm and cm. Internally everything is mm.
-    o.mua = parseQuantity(a.mua, Dimension::InverseLength, "--mua", "/cm");
-    o.mus = parseQuantity(a.mus, Dimension::InverseLength, "--mus", "/cm");
-    o.thickness = parseQuantity(a.thickness, Dimension::Length, "--thickness", "cm");
+    o.mua = physical(a.mua, Dimension::InverseLength, "mua", "/cm", true);
+    o.mus = physical(a.mus, Dimension::InverseLength, "mus", "/cm", true);
+    o.thickness = physical(a.thickness, Dimension::Length, "thickness", "cm", false);
     o.g = a.g;
     o.n = index(a.n, "n");
     o.nAbove = index(a.nAbove, "n-above");

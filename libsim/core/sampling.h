@@ -24,6 +24,17 @@ inline double cosineHemispherePdf(double cosTheta) { return cosTheta > 0 ? cosTh
 // Uniform point on a triangle, as barycentrics (b0, b1) (Heitz 2019 low-distortion map).
 std::array<double, 2> sampleUniformTriangle(double u1, double u2);
 
+// cos(phi) for phi uniform in [0, 2 pi), without trigonometry (von Neumann 1951): for (x, y)
+// uniform in the unit disk, (x^2 - y^2) / (x^2 + y^2) = cos(2 atan2(y, x)).
+template <class Generator>
+double sampleCosUniformAzimuth(Generator& rng) {
+    while (true) {
+        const double x = 2.0 * rng.uniform() - 1.0, y = 2.0 * rng.uniform() - 1.0;
+        const double r2 = x * x + y * y;
+        if (r2 <= 1.0 && r2 > 0.0) return (x * x - y * y) / r2;
+    }
+}
+
 // Index into weights with probability proportional to weight; u is remapped to a fresh uniform.
 int sampleDiscrete(std::span<const double> weights, double u, double* pmf = nullptr, double* uRemapped = nullptr);
 

@@ -79,7 +79,9 @@ double parseQuantity(std::string_view text, Dimension dim, std::string_view what
     if (unit.empty()) {
         if (dim == Dimension::Dimensionless) return value;
         if (!bareUnit) return fail("missing unit");
-        return value * *unitScale(*bareUnit, dim);
+        const auto scale = unitScale(*bareUnit, dim);
+        if (!scale) return fail("the default unit \"" + std::string(*bareUnit) + "\" does not fit");
+        return value * *scale;
     }
     const auto scale = unitScale(unit, dim);
     if (!scale) return fail("unknown or mismatched unit \"" + std::string(unit) + "\"");

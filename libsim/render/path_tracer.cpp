@@ -28,16 +28,22 @@ int PathTracer::mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const
     return dot(dir, n) < 0 ? shape.insideMedium : shape.outsideMedium;
 }
 
-SampledSpectrum PathTracer::transmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl) const {
+SampledSpectrum PathTracer::transmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl,
+                                         const Vec3* surfaceNormal) const {
     SampledSpectrum T(1.0);
+    // Rays start exactly on surfaces and skip self-intersections with tMin, so every segment lies on
+    // the line from p0 to p1 and its length is exact.
     Vec3 origin = p0;
+    const Vec3* normal = surfaceNormal;
+    Vec3 lastNormal;
     for (int crossings = 0; crossings < 1024; ++crossings) {
         const Vec3 d = p1 - origin;
         const double dist = length(d);
         if (!(dist > 0)) return T;
         const Ray r{origin, d / dist};
-        const double eps = rayEpsilon(p1);
-        const auto hit = scene_.geometry.intersect(r, 0.0, dist - eps);
+        const double tMin = normal ? rayEpsilon(origin) / std::max(std::abs(dot(*normal, r.d)), 1e-2) : 0.0;
+        const double tMax = dist - rayEpsilon(p1);
+        const auto hit = tMax > tMin ? scene_.geometry.intersect(r, tMin, tMax) : std::nullopt;
         const double segment = hit ? hit->t : dist;
         if (medium != kNone) {
             // Homogeneous media: the exact transmittance, with no sampling noise.
@@ -48,7 +54,9 @@ SampledSpectrum PathTracer::transmittance(const Vec3& p0, const Vec3& p1, int me
         const ShapeInfo& s = scene_.shapes[hit->shape];
         if (!(s.isInterface && s.material == kNone)) return SampledSpectrum(0.0);
         medium = mediumAfterCrossing(s, hit->n, r.d, medium);
-        origin = offsetAlong(hit->p, hit->n, r.d);
+        origin = r.at(hit->t);
+        lastNormal = hit->n;
+        normal = &lastNormal;
     }
     return SampledSpectrum(0.0);
 }
@@ -70,13 +78,9 @@ SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengt
         if (!ls || !ls->L || !(ls->pdf > 0)) return SampledSpectrum(0.0);
         const auto [fHat, scatterPdf] = evalScatter(ls->wi);
         if (!fHat) return SampledSpectrum(0.0);
-        Vec3 origin = p;
         int startMedium = lightMedium;
-        if (surface) {
-            origin = offsetAlong(p, nOffset, ls->wi);
-            startMedium = mediumAfterCrossing(*surface, nOffset, ls->wi, lightMedium);
-        }
-        const SampledSpectrum T = transmittance(origin, ls->p, startMedium, wl);
+        if (surface) startMedium = mediumAfterCrossing(*surface, nOffset, ls->wi, lightMedium);
+        const SampledSpectrum T = transmittance(p, ls->p, startMedium, wl, surface ? &nOffset : nullptr);
         if (!T) return SampledSpectrum(0.0);
         const SampledSpectrum rl = r_p * ls->pdf;
         if (ls->delta) return beta * fHat * T * ls->L / rl.average();

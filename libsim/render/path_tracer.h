@@ -31,7 +31,9 @@ public:
     SampledSpectrum radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;
 
     // Transmittance from p0 to p1 through null interfaces and media; zero if a surface blocks.
-    SampledSpectrum transmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl) const;
+    // When p0 lies on a surface, pass its normal so the ray leaves it without self-intersection.
+    SampledSpectrum transmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl,
+                                  const Vec3* surfaceNormal = nullptr) const;
 
 private:
     int mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const Vec3& dir, int current) const;

@@ -1,7 +1,9 @@
 #include "render/slab_transport.h"
 
 #include <chrono>
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -10,6 +12,7 @@
 #include "core/math.h"
 #include "core/parallel.h"
 #include "core/rng.h"
+#include "core/sampling.h"
 #include "materials/fresnel.h"
 #include "media/free_flight.h"
 #include "media/henyey_greenstein.h"
@@ -67,13 +70,13 @@ SlabResult simulateSlab(const SlabOptions& opt, const std::function<void(uint64_
         const uint64_t first = chunk * kPhotonsPerChunk;
         const uint64_t count = std::min<uint64_t>(kPhotonsPerChunk, opt.photons - first);
         for (uint64_t p = 0; p < count; ++p) {
-            Vec3 pos(0, 0, 0), dir(0, 0, 1);
+            // The slab is laterally infinite and only Rd and Tt are tallied, so the state is the depth z and
+            // the direction cosine uz; the azimuth enters only through cos(phi).
+            double z = 0.0, uz = 1.0;
             double w = 1.0 - rsp;
             bool scattered = false;
             while (true) {
-                const double tBoundary = dir.z > 0 ? (d - pos.z) / dir.z
-                                         : dir.z < 0 ? -pos.z / dir.z
-                                                     : std::numeric_limits<double>::infinity();
+                const double tBoundary = uz > 0 ? (d - z) / uz : uz < 0 ? -z / uz : std::numeric_limits<double>::infinity();
                 double tCollision = -1;
                 sampleTmaj<double>(HomogeneousMajorantIterator<double>(0.0, tBoundary, mut), rng,
                                    [&](double t, double, double) {
@@ -81,26 +84,27 @@ SlabResult simulateSlab(const SlabOptions& opt, const std::function<void(uint64_
                                        return false;
                                    });
                 if (tCollision >= 0) {
-                    pos = pos + dir * tCollision;
+                    z += uz * tCollision;
                     // Implicit capture: the absorbed fraction leaves the weight, the scattered one goes on.
                     w *= albedo;
                     if (w < kWeightThreshold) {
                         if (w == 0.0 || rng.uniform() >= kSurvival) break;
                         w /= kSurvival;
                     }
-                    dir = phase.sample(dir, rng.uniform(), rng.uniform());
+                    const double cosTheta = phase.sampleCos(rng.uniform());
+                    const double sinTheta = safeSqrt(1.0 - cosTheta * cosTheta);
+                    uz = std::clamp(uz * cosTheta + safeSqrt(1.0 - uz * uz) * sinTheta * sampleCosUniformAzimuth(rng), -1.0, 1.0);
                     scattered = true;
                     continue;
                 }
-                pos = pos + dir * tBoundary;
-                pos.z = dir.z > 0 ? d : 0.0;  // snap to the boundary to stop drift
-                const double nOut = dir.z > 0 ? opt.nBelow : opt.nAbove;
-                const double reflectance = fresnelDielectric(std::abs(dir.z), nOut / opt.n);
+                z = uz > 0 ? d : 0.0;  // exactly on the boundary
+                const double nOut = uz > 0 ? opt.nBelow : opt.nAbove;
+                const double reflectance = fresnelDielectric(std::abs(uz), nOut / opt.n);
                 if (reflectance > 0 && (reflectance >= 1.0 || rng.uniform() < reflectance)) {
-                    dir.z = -dir.z;
+                    uz = -uz;
                     continue;
                 }
-                if (dir.z < 0) {
+                if (uz < 0) {
                     tally.r += w;
                     tally.r2 += w * w;
                 } else {

@@ -1,5 +1,6 @@
 #include "scene/scene_loader.h"
 
+#include <charconv>
 #include <cmath>
 #include <fstream>
 #include <map>
@@ -120,6 +121,14 @@ private:
     const fs::path& file_;
 };
 
+// "0.5 /mm", "-1/mm", "inf /mm", "nan /mm": a quantity (possibly invalid), not a spectrum name.
+bool startsWithNumber(const std::string& s) {
+    double v = 0;
+    const char* b = s.data() + (s.size() > 0 && s[0] == '+' ? 1 : 0);
+    const auto [ptr, ec] = std::from_chars(b, s.data() + s.size(), v);
+    return ec == std::errc() && ptr != b;
+}
+
 enum class SpectrumKind { Reflectance, Coefficient, Emission, Unitless };
 
 class Loader {
@@ -178,8 +187,7 @@ private:
         }
         if (n.raw().is_string()) {
             const std::string s = n.str();
-            if (coefficient && !s.empty() && (std::isdigit(static_cast<unsigned char>(s[0])) || s[0] == '.' || s[0] == '-' || s[0] == '+'))
-                return checked(n, Spectrum::constant(n.quantity(Dimension::InverseLength)), kind);
+            if (coefficient && startsWithNumber(s)) return checked(n, Spectrum::constant(n.quantity(Dimension::InverseLength)), kind);
             return checked(n, Spectrum::tabulated(resolveNamed(n, s)), kind);
         }
         if (!n.raw().is_object()) n.fail("expected a number, a quantity, a spectrum name or a spectrum object");

@@ -23,7 +23,7 @@ TabulatedSpectrum::TabulatedSpectrum(std::vector<double> lambdaNm, std::vector<d
                               " nm");
         if (!std::isfinite(values_[i]) || values_[i] < 0)
             throw ConfigError(source + ": negative or non-finite value " + std::to_string(values_[i]) + " at " +
-                              std::to_string(lambda_[i]) + " nm");
+                              std::to_string(lambda_[i]) + " nm (row " + std::to_string(i + 1) + ")");
     }
 }
 

@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# Installs the Debian 12 packages Fluorosim needs, skipping those already present. Run as root.
+set -euo pipefail
+packages=(
+  g++ cmake ninja-build ccache pkg-config
+  libtbb-dev libopenvdb-dev libnanovdb-dev libboost-iostreams-dev libboost-dev
+  libembree-dev libopenexr-dev libimath-dev libpng-dev libtiff-dev libassimp-dev
+  libcli11-dev nlohmann-json3-dev libgtest-dev libbenchmark-dev
+)
+if [[ "${1:-}" == "--docs" ]]; then packages+=(python3 python3-matplotlib python3-numpy); fi
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]})); then
+  echo "install-deps: installing ${missing[*]}" >&2
+  if [[ $(id -u) -ne 0 ]]; then echo "install-deps: run as root to install packages" >&2; exit 1; fi
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq
+  apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+else
+  echo "install-deps: all packages present" >&2
+fi

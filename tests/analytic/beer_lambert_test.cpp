@@ -1,0 +1,70 @@
+// Beer-Lambert attenuation through absorbing media against the closed form exp(-sigma_a d).
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "render/slab_transport.h"
+#include "support/test_scenes.h"
+
+namespace fluorosim {
+namespace {
+
+using testing::addEnclosure;
+using testing::addInterfaceSphere;
+using testing::addMedium;
+
+TEST(BeerLambert, ShadowRayTransmittanceIsExact) {
+    Scene scene;
+    addEnclosure(scene, 20, 1.0);
+    const int m = addMedium(scene, "ink", 0.8, 0.0, 0.0, 1.0);
+    addInterfaceSphere(scene, Vec3(0, 0, 0), 1.5, m, kNone);
+    scene.finalize();
+    const PathTracer tracer(scene);
+    const SampledWavelengths wl = SampledWavelengths::sampleUniform(0.3, 400, 700);
+    // Through the centre: 3 mm of ink. Off-centre chord at height h: 2 sqrt(r^2 - h^2).
+    for (double h : {0.0, 0.5, 1.2}) {
+        const double chord = 2 * std::sqrt(1.5 * 1.5 - h * h);
+        const SampledSpectrum T = tracer.transmittance(Vec3(-5, h, 0), Vec3(5, h, 0), kNone, wl);
+        for (int i = 0; i < kNumWavelengths; ++i) EXPECT_NEAR(T[i], std::exp(-0.8 * chord), 1e-9) << "h = " << h;
+    }
+}
+
+TEST(BeerLambert, PathTracedRadianceThroughAbsorber) {
+    // Free-flight sampling terminates paths at absorption (analog); the mean must be Le exp(-tau).
+    Scene scene;
+    const double Le = 3.0;
+    addEnclosure(scene, 20, Le);
+    const int m = addMedium(scene, "ink", 0.5, 0.0, 0.0, 1.0);
+    addInterfaceSphere(scene, Vec3(0, 0, 0), 1.0, m, kNone);
+    scene.finalize();
+    const PathTracer tracer(scene);
+    PathStats stats;
+    const int n = 200000;
+    double sum = 0, sum2 = 0;
+    for (int i = 0; i < n; ++i) {
+        Rng rng = Rng::forKey(5, static_cast<uint64_t>(i), 1);
+        const SampledWavelengths wl = SampledWavelengths::sampleUniform(rng.uniform(), 400, 700);
+        const double v = tracer.radiance(Ray{Vec3(0, 0, -5), Vec3(0, 0, 1)}, kNone, wl, rng, stats).average();
+        sum += v;
+        sum2 += v * v;
+    }
+    const double mean = sum / n, se = std::sqrt((sum2 / n - mean * mean) / (n - 1));
+    EXPECT_NEAR(mean, Le * std::exp(-0.5 * 2.0), 4 * se) << "se " << se;
+    EXPECT_LT(se, 0.01);
+}
+
+TEST(BeerLambert, SlabPureAbsorberMatchedBoundaries) {
+    // Matched boundaries: Tt = exp(-mua d) exactly in expectation; Rd = 0 exactly.
+    SlabOptions o;
+    o.mua = 1.0;  // 1/mm
+    o.thickness = 1.3;
+    o.photons = 400000;
+    o.seed = 3;
+    const SlabResult r = simulateSlab(o);
+    EXPECT_EQ(r.Rd, 0.0);
+    EXPECT_NEAR(r.Tt, std::exp(-1.3), 4 * r.TtStderr);
+    EXPECT_EQ(r.Tt, r.Tballistic);
+}
+
+}  // namespace
+}  // namespace fluorosim

@@ -1,0 +1,306 @@
+// The fluorosim command line: exit codes (2 ConfigError, 3 IoError) and one-line error messages on
+// stderr that name the problem, run through the built binary.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace fluorosim {
+namespace {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+bool contains(const std::string& haystack, const std::string& needle) { return haystack.find(needle) != std::string::npos; }
+
+std::string quote(const std::string& s) {
+    std::string q = "'";
+    for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+    return q + "'";
+}
+
+std::string readFile(const fs::path& p) {
+    std::ifstream in(p);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+}
+
+struct RunResult {
+    int exitCode = -1;  // 128+N when killed by signal N (as the shell reports it)
+    std::string out, err;
+    double seconds = 0;
+};
+
+// A per-test temporary folder, removed at the end of the test.
+class TempDir {
+public:
+    TempDir() {
+        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+        path_ = fs::temp_directory_path() / ("fluorosim_cli_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
+        fs::remove_all(path_);
+        fs::create_directories(path_);
+    }
+    ~TempDir() {
+        std::error_code ec;
+        fs::remove_all(path_, ec);
+    }
+    const fs::path& path() const { return path_; }
+    fs::path write(const std::string& name, const std::string& text) const {
+        const fs::path p = path_ / name;
+        std::ofstream(p) << text;
+        return p;
+    }
+
+private:
+    fs::path path_;
+};
+
+// Runs the CLI with `args`, stdin from /dev/null, stdout and stderr captured to files in `dir`.
+// A generous timeout keeps a misbehaving binary from hanging the test run (exit code 124).
+RunResult runCli(const TempDir& dir, const std::vector<std::string>& args, int timeoutSeconds = 120) {
+    const fs::path outFile = dir.path() / "stdout.txt", errFile = dir.path() / "stderr.txt";
+    std::string cmd = "timeout -k 5 " + std::to_string(timeoutSeconds) + " " + quote(FLUOROSIM_CLI);
+    for (const auto& a : args) cmd += " " + quote(a);
+    cmd += " </dev/null >" + quote(outFile.string()) + " 2>" + quote(errFile.string());
+    const auto start = std::chrono::steady_clock::now();
+    const int status = std::system(cmd.c_str());
+    RunResult r;
+    r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    r.exitCode = status == -1 ? -1 : WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    r.out = readFile(outFile);
+    r.err = readFile(errFile);
+    return r;
+}
+
+// stderr is exactly one line, starting with "fluorosim: ", containing every part.
+void expectOneLineError(const RunResult& r, const std::vector<std::string>& parts) {
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << "stderr:\n" << r.err;
+    EXPECT_TRUE(!r.err.empty() && r.err.back() == '\n') << "stderr:\n" << r.err;
+    EXPECT_EQ(r.err.rfind("fluorosim: ", 0), 0u) << "stderr:\n" << r.err;
+    for (const auto& p : parts) EXPECT_TRUE(contains(r.err, p)) << "no \"" << p << "\" in stderr:\n" << r.err;
+}
+
+std::string sceneJson(int width, int height, int spp) {
+    json j = json::parse(R"({
+      "fluorosim_scene": 1,
+      "spectral": {"range": ["400 nm", "700 nm"], "bin_width": "50 nm"},
+      "render": {"seed": 1},
+      "camera": {"position": ["0 mm", "50 mm", "-200 mm"], "look_at": ["0 mm", "50 mm", "0 mm"], "fov_y_deg": 40},
+      "materials": {"white": {"type": "diffuse", "reflectance": 0.7}},
+      "shapes": [
+        {"type": "quad", "name": "floor", "origin": ["-100 mm", "0 mm", "-100 mm"], "edge1": ["200 mm", "0 mm", "0 mm"],
+         "edge2": ["0 mm", "0 mm", "200 mm"], "material": "white"},
+        {"type": "sphere", "name": "ball", "center": ["0 mm", "30 mm", "0 mm"], "radius": "30 mm", "material": "white"},
+        {"type": "quad", "name": "light", "origin": ["-20 mm", "120 mm", "-20 mm"], "edge1": ["40 mm", "0 mm", "0 mm"],
+         "edge2": ["0 mm", "0 mm", "40 mm"], "emission": {"radiance": {"reference": "illuminant:D65", "scale": 0.1}, "two_sided": true}}
+      ]
+    })");
+    j["camera"]["resolution"] = {width, height};
+    j["render"]["spp"] = spp;
+    return j.dump(2);
+}
+
+// ---- render ----
+
+TEST(Cli, RenderMissingSceneFile) {
+    const TempDir dir;
+    const std::string scene = (dir.path() / "no_such_scene.json").string();
+    const auto r = runCli(dir, {"render", scene, "-o", (dir.path() / "out.exr").string()});
+    EXPECT_EQ(r.exitCode, 3);
+    expectOneLineError(r, {scene});
+}
+
+TEST(Cli, RenderToMissingOutputFolderFailsBeforeRendering) {
+    const TempDir dir;
+    // A scene that would take very long to render: the check must come first.
+    const auto scene = dir.write("big.json", sceneJson(1024, 1024, 1 << 20));
+    const fs::path folder = dir.path() / "no_such_folder";
+    const auto r = runCli(dir, {"render", scene.string(), "-o", (folder / "out.exr").string(), "--threads", "1"}, 60);
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_NE(r.exitCode, 124) << "timed out: it rendered before checking the output folder";
+    EXPECT_LT(r.seconds, 10.0);
+    expectOneLineError(r, {folder.string()});
+    EXPECT_FALSE(fs::exists(folder));
+}
+
+TEST(Cli, RenderToNonExrOutput) {
+    const TempDir dir;
+    const auto scene = dir.write("scene.json", sceneJson(8, 8, 2));
+    const std::string out = (dir.path() / "out.png").string();
+    const auto r = runCli(dir, {"render", scene.string(), "-o", out, "--threads", "1"});
+    EXPECT_EQ(r.exitCode, 2);
+    EXPECT_LT(r.seconds, 10.0);
+    expectOneLineError(r, {out, ".exr"});
+    EXPECT_FALSE(fs::exists(out));
+}
+
+TEST(Cli, RenderMalformedScene) {
+    const TempDir dir;
+    const auto scene = dir.write("broken.json", "{\n  \"fluorosim_scene\": 1,\n  \"shapes\": [,]\n}\n");
+    const auto r = runCli(dir, {"render", scene.string(), "-o", (dir.path() / "out.exr").string()});
+    EXPECT_EQ(r.exitCode, 2);
+    expectOneLineError(r, {scene.string()});
+}
+
+TEST(Cli, RenderInvalidSceneNamesFieldAndValue) {
+    const TempDir dir;
+    json j = json::parse(sceneJson(8, 8, 2));
+    j["shapes"][1]["radius"] = "0 mm";
+    const auto scene = dir.write("bad_radius.json", j.dump());
+    const auto r = runCli(dir, {"render", scene.string(), "-o", (dir.path() / "out.exr").string()});
+    EXPECT_EQ(r.exitCode, 2);
+    expectOneLineError(r, {scene.string(), "/shapes/1/radius", "0 mm"});
+}
+
+TEST(Cli, RenderSppZero) {
+    const TempDir dir;
+    const auto scene = dir.write("scene.json", sceneJson(8, 8, 2));
+    const auto r = runCli(dir, {"render", scene.string(), "-o", (dir.path() / "out.exr").string(), "--spp", "0"});
+    EXPECT_EQ(r.exitCode, 2);
+    expectOneLineError(r, {"--spp", "0"});
+    EXPECT_FALSE(fs::exists(dir.path() / "out.exr"));
+}
+
+TEST(Cli, RenderSppNegative) {
+    const TempDir dir;
+    const auto scene = dir.write("scene.json", sceneJson(8, 8, 2));
+    const auto r = runCli(dir, {"render", scene.string(), "-o", (dir.path() / "out.exr").string(), "--spp", "-3"});
+    EXPECT_EQ(r.exitCode, 2);
+    expectOneLineError(r, {"--spp", "-3"});
+    EXPECT_FALSE(fs::exists(dir.path() / "out.exr"));
+}
+
+TEST(Cli, RenderSppMinusOneIsRejectedToo) {
+    // -1 must not act as a hidden "use the scene's spp" sentinel.
+    const TempDir dir;
+    const auto scene = dir.write("scene.json", sceneJson(8, 8, 2));
+    const auto r = runCli(dir, {"render", scene.string(), "-o", (dir.path() / "out.exr").string(), "--spp", "-1", "--threads", "1"});
+    EXPECT_EQ(r.exitCode, 2);
+    expectOneLineError(r, {"--spp", "-1"});
+    EXPECT_FALSE(fs::exists(dir.path() / "out.exr"));
+}
+
+TEST(Cli, TinyRenderWritesExrAndPng) {
+    const TempDir dir;
+    const auto scene = dir.write("scene.json", sceneJson(8, 8, 16));
+    const fs::path out = dir.path() / "tiny.exr";
+    const auto r = runCli(dir, {"render", scene.string(), "-o", out.string(), "--spp", "2", "--threads", "1", "--seed", "5"});
+    ASSERT_EQ(r.exitCode, 0) << "stderr:\n" << r.err;
+    ASSERT_TRUE(fs::exists(out));
+    EXPECT_GT(fs::file_size(out), 0u);
+    const fs::path png = dir.path() / "tiny.png";
+    ASSERT_TRUE(fs::exists(png));
+    EXPECT_GT(fs::file_size(png), 0u);
+    EXPECT_FALSE(fs::exists(out.string() + ".partial.exr"));
+    // stdout is one JSON summary.
+    const auto summary = json::parse(r.out);
+    EXPECT_EQ(summary.at("spp").get<int>(), 2);
+    EXPECT_EQ(summary.at("image").get<std::string>(), out.string());
+    EXPECT_EQ(summary.at("cancelled").get<bool>(), false);
+    // No stray write-probe files are left in the output folder.
+    for (const auto& e : fs::directory_iterator(dir.path()))
+        EXPECT_FALSE(contains(e.path().filename().string(), "write-test")) << e.path();
+}
+
+// ---- validate slab ----
+
+const std::vector<std::string> kSlabBase = {"validate", "slab", "--photons", "1e4", "--quiet", "--threads", "1"};
+
+std::vector<std::string> slabArgs(std::initializer_list<std::string> extra) {
+    std::vector<std::string> a = kSlabBase;
+    a.insert(a.end(), extra.begin(), extra.end());
+    return a;
+}
+
+void expectSlabRejected(const std::vector<std::string>& args, const std::string& option, const std::string& value) {
+    SCOPED_TRACE(option + " " + value);
+    const TempDir dir;
+    const auto r = runCli(dir, args);
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_LT(r.exitCode, 124) << "crashed or timed out";
+    expectOneLineError(r, {option, value});
+    EXPECT_TRUE(r.out.empty()) << r.out;
+}
+
+TEST(Cli, SlabRejectsAnisotropyOne) {
+    expectSlabRejected(slabArgs({"--thickness", "0.1", "--mus", "10", "--g", "1.0"}), "--g", "1.0");
+}
+
+TEST(Cli, SlabRejectsAnisotropyNan) {
+    expectSlabRejected(slabArgs({"--thickness", "0.1", "--mus", "10", "--g", "nan"}), "--g", "nan");
+}
+
+TEST(Cli, SlabRejectsNegativeAbsorption) {
+    expectSlabRejected(slabArgs({"--thickness", "0.1", "--mua", "-1"}), "--mua", "-1");
+}
+
+TEST(Cli, SlabRejectsZeroThickness) {
+    expectSlabRejected(slabArgs({"--thickness", "0"}), "--thickness", "0");
+}
+
+TEST(Cli, SlabRejectsIndexBelowOne) {
+    expectSlabRejected(slabArgs({"--thickness", "0.1", "--n", "0.5"}), "--n", "0.5");
+}
+
+TEST(Cli, SlabRejectsSinglePhoton) {
+    expectSlabRejected({"validate", "slab", "--thickness", "0.1", "--quiet", "--photons", "1"}, "--photons", "1");
+}
+
+TEST(Cli, SlabRejectsCoefficientWithWrongUnit) {
+    expectSlabRejected(slabArgs({"--thickness", "0.1", "--mua", "5 mm"}), "--mua", "5 mm");
+}
+
+TEST(Cli, SlabJsonHasTheDocumentedKeys) {
+    const TempDir dir;
+    const auto r = runCli(dir, slabArgs({"--mua", "1", "--mus", "100", "--g", "0.9", "--thickness", "0.1", "--seed", "3"}));
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_TRUE(r.err.empty()) << "--quiet still wrote:\n" << r.err;
+    const auto j = json::parse(r.out);
+    for (const char* key : {"Rd", "Tt", "Rd_stderr", "Tt_stderr", "Rsp", "photons", "seconds"}) {
+        ASSERT_TRUE(j.contains(key)) << key << " missing in " << r.out;
+        EXPECT_TRUE(j.at(key).is_number()) << key;
+    }
+    EXPECT_EQ(j.at("photons").get<uint64_t>(), 10000u);
+    const double rd = j.at("Rd").get<double>(), tt = j.at("Tt").get<double>();
+    EXPECT_GT(rd, 0.0);
+    EXPECT_GT(tt, 0.0);
+    EXPECT_LE(rd + tt + j.at("Rsp").get<double>(), 1.0 + 1e-9);
+    EXPECT_GT(j.at("Rd_stderr").get<double>(), 0.0);
+    EXPECT_LT(j.at("Rd_stderr").get<double>(), 0.05);
+    EXPECT_GE(j.at("seconds").get<double>(), 0.0);
+}
+
+TEST(Cli, SlabUnitsGiveBitIdenticalResults) {
+    const TempDir dir;
+    const auto withUnits = runCli(dir, slabArgs({"--mua", "9/mm", "--mus", "0.9/mm", "--thickness", "0.2mm", "--seed", "11"}));
+    ASSERT_EQ(withUnits.exitCode, 0) << withUnits.err;
+    const auto bare = runCli(dir, slabArgs({"--mua", "90", "--mus", "9", "--thickness", "0.02", "--seed", "11"}));
+    ASSERT_EQ(bare.exitCode, 0) << bare.err;
+    auto a = json::parse(withUnits.out), b = json::parse(bare.out);
+    for (const char* key : {"Rd", "Tt", "Rd_stderr", "Tt_stderr", "Rsp", "Ta", "Tt_ballistic", "photons"})
+        EXPECT_EQ(a.at(key), b.at(key)) << key << "\nunits: " << withUnits.out << "\nbare:  " << bare.out;
+    EXPECT_EQ(a.at("input"), b.at("input"));
+    EXPECT_GT(a.at("Rd").get<double>(), 0.0);
+    EXPECT_DOUBLE_EQ(a.at("input").at("mua_per_cm").get<double>(), 90.0);
+    EXPECT_DOUBLE_EQ(a.at("input").at("thickness_cm").get<double>(), 0.02);
+}
+
+TEST(Cli, NoSubcommandIsAParseError) {
+    const TempDir dir;
+    const auto r = runCli(dir, {});
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_LT(r.exitCode, 124);
+}
+
+}  // namespace
+}  // namespace fluorosim
