@@ -295,7 +295,7 @@ std::string DirectionalResult::table() const {
 
 DirectionalResult runDirectional(const DirectionalTest& test) {
     IntegrationStats stats;
-    const auto prob = integrateOverGrid(test.grid, test.pdf, test.integrationTol, 2, 4'000'000, &stats);
+    const auto prob = integrateOverGrid(test.grid, test.pdf, test.integrationTol, 2, test.integrationBudget, &stats);
     DirectionalResult r = runDirectional(test, prob);
     r.integration = stats;
     return r;

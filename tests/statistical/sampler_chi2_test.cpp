@@ -51,6 +51,8 @@ void expectMatches(const std::string& name, const DirectionalResult& r, double a
     EXPECT_EQ(r.pdfMismatches, 0u) << name << ": " << r.summary();
     EXPECT_EQ(r.outside, 0u) << name << ": " << r.summary();
     EXPECT_EQ(r.nonFinite, 0u) << name << ": " << r.summary();
+    // Cubature error (a pessimistic estimate) below 10 expected samples in total.
+    EXPECT_LE(r.integration.errorEstimate * static_cast<double>(r.total), 10.0) << name << ": " << r.summary();
     if (canFail) {
         // The pdf integrates to the probability of success (the failure cell tests this too).
         EXPECT_NEAR(r.pdfIntegral, r.successFraction(), 5 * r.successStderr() + 1e-6) << name << ": " << r.summary();
@@ -198,6 +200,67 @@ TEST(Chi2Sampling, UniformSphere) {
     t.pdf = [](const Vec3&) { return uniformSpherePdf(); };
     t.seed = 12;
     expectMatches(t.name, chi2::runDirectional(t), chi2::kFamilyAlpha, false);
+}
+
+// cos(phi) for phi uniform (the slab kernel's azimuth): the arcsine density 1 / (pi sqrt(1 - x^2)),
+// CDF 1 - acos(x) / pi.
+TEST(Chi2Sampling, CosUniformAzimuth) {
+    const auto edges = chi2::uniformEdges(-1, 1, 50);
+    std::vector<double> obs(edges.size() - 1, 0.0);
+    Rng rng(13, 4);
+    const int n = 1'000'000;
+    int outside = 0;
+    for (int i = 0; i < n; ++i) {
+        const double x = sampleCosUniformAzimuth(rng);
+        const int b = x == 1.0 ? static_cast<int>(obs.size()) - 1 : chi2::binIndex(edges, x);
+        if (b < 0) {
+            ++outside;
+            continue;
+        }
+        obs[static_cast<size_t>(b)] += 1;
+    }
+    const auto expected = chi2::expectedFromCdf(edges, [](double x) { return 1 - std::acos(std::clamp(x, -1.0, 1.0)) / kPi; }, n);
+    const auto r = chi2::chiSquare(obs, expected);
+    logResult("cos of uniform azimuth", r.summary());
+    EXPECT_EQ(outside, 0);
+    EXPECT_TRUE(r.accept(chi2::kFamilyAlpha)) << r.summary();
+}
+
+// Discrete sampling: index i with probability w_i / sum (zero weights never), the reported pmf, and
+// the remapped u uniform on [0, 1) (it is reused for the next decision).
+TEST(Chi2Sampling, Discrete) {
+    const std::vector<double> w = {0.5, 0.0, 2.0, 1e-3, 3.0, 0.0, 0.25};
+    const double total = 5.751;
+    std::vector<double> obs(w.size(), 0.0);
+    const auto edges = chi2::uniformEdges(0, 1, 40);
+    std::vector<double> remapObs(edges.size() - 1, 0.0);
+    Rng rng(14, 4);
+    const int n = 1'000'000;
+    int badPmf = 0, badRemap = 0;
+    for (int k = 0; k < n; ++k) {
+        double pmf = -1, ur = -1;
+        const int i = sampleDiscrete(w, rng.uniform(), &pmf, &ur);
+        ASSERT_GE(i, 0);
+        obs[static_cast<size_t>(i)] += 1;
+        if (relDiff(pmf, w[static_cast<size_t>(i)] / total) > 1e-12) ++badPmf;
+        const int b = chi2::binIndex(edges, ur);
+        if (b < 0) {
+            ++badRemap;
+            continue;
+        }
+        remapObs[static_cast<size_t>(b)] += 1;
+    }
+    std::vector<double> expected;
+    for (double x : w) expected.push_back(n * x / total);
+    const auto r = chi2::chiSquare(obs, expected);
+    const auto rr = chi2::chiSquare(remapObs, std::vector<double>(remapObs.size(), n / 40.0));
+    logResult("sampleDiscrete index", r.summary());
+    logResult("sampleDiscrete remapped u", rr.summary());
+    const double alpha = chi2::sidak(chi2::kFamilyAlpha, 2);
+    EXPECT_TRUE(r.accept(alpha)) << r.summary();
+    EXPECT_TRUE(rr.accept(alpha)) << rr.summary();
+    EXPECT_EQ(badPmf, 0);
+    EXPECT_EQ(badRemap, 0);
 }
 
 // ------------------------------------------------------------------------------------------------
