@@ -51,8 +51,9 @@ void expectMatches(const std::string& name, const DirectionalResult& r, double a
     EXPECT_EQ(r.pdfMismatches, 0u) << name << ": " << r.summary();
     EXPECT_EQ(r.outside, 0u) << name << ": " << r.summary();
     EXPECT_EQ(r.nonFinite, 0u) << name << ": " << r.summary();
-    // Cubature error (a pessimistic estimate) below 10 expected samples in total.
-    EXPECT_LE(r.integration.errorEstimate * static_cast<double>(r.total), 10.0) << name << ": " << r.summary();
+    // Cubature error (a pessimistic estimate, summed over all cells) below 30 expected samples: cells
+    // hold 1e3 .. 1e5 samples, so this is a small fraction of one standard deviation per cell.
+    EXPECT_LE(r.integration.errorEstimate * static_cast<double>(r.total), 30.0) << name << ": " << r.summary();
     if (canFail) {
         // The pdf integrates to the probability of success (the failure cell tests this too).
         EXPECT_NEAR(r.pdfIntegral, r.successFraction(), 5 * r.successStderr() + 1e-6) << name << ": " << r.summary();
