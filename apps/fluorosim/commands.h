@@ -1,7 +1,13 @@
 #pragma once
 #include <CLI/CLI.hpp>
+#include <stdexcept>
 
 namespace fluorosim::app {
+
+// A run stopped by SIGINT/SIGTERM after writing its finished work; main() exits with 130.
+struct Interrupted : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
 
 // Each adds its subcommand; the callback throws fluorosim::Error on bad input.
 void addRenderCommand(CLI::App& app);

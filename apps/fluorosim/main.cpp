@@ -15,6 +15,9 @@ int main(int argc, char** argv) {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
         return app.exit(e);
+    } catch (const fluorosim::app::Interrupted& e) {
+        std::fprintf(stderr, "fluorosim: %s\n", e.what());
+        return 130;
     } catch (const fluorosim::ConfigError& e) {
         std::fprintf(stderr, "fluorosim: error: %s\n", e.what());
         return 2;

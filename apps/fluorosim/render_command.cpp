@@ -1,11 +1,14 @@
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <optional>
 #include <unistd.h>
+
+#include <nlohmann/json.hpp>
 
 #include "commands.h"
 #include "core/errors.h"
@@ -42,13 +45,18 @@ void checkWritable(const fs::path& out) {
     if (out.extension() != ".exr") throw ConfigError(out.string() + ": output must be an .exr file");
 }
 
+// Reinhard's key value: maps the log-average luminance to 0.18, so small bright emitters do not
+// darken the preview.
 double autoExposure(const ExrImage& img) {
-    std::vector<float> lum;
-    for (size_t p = 0; p + 2 < img.rgb.size(); p += 3) lum.push_back(0.2126f * img.rgb[p] + 0.7152f * img.rgb[p + 1] + 0.0722f * img.rgb[p + 2]);
-    if (lum.empty()) return 1.0;
-    const size_t k = lum.size() * 99 / 100;
-    std::nth_element(lum.begin(), lum.begin() + static_cast<long>(k), lum.end());
-    return lum[k] > 0 ? 1.0 / lum[k] : 1.0;
+    double logSum = 0;
+    size_t count = 0;
+    for (size_t p = 0; p + 2 < img.rgb.size(); p += 3) {
+        const double y = 0.2126 * img.rgb[p] + 0.7152 * img.rgb[p + 1] + 0.0722 * img.rgb[p + 2];
+        if (!(y > 0) || !std::isfinite(y)) continue;
+        logSum += std::log(y);
+        ++count;
+    }
+    return count ? 0.18 / std::exp(logSum / static_cast<double>(count)) : 1.0;
 }
 
 void writeOutputs(const fs::path& out, const Film& film, const Scene& scene, int sppDone, const RenderSummary* summary) {
@@ -68,6 +76,7 @@ void writeOutputs(const fs::path& out, const Film& film, const Scene& scene, int
 
 void runRender(const RenderArgs& a) {
     const fs::path out = a.output;
+    if (!(a.checkpointSeconds > 0)) throw ConfigError("--checkpoint-seconds: must be positive, got " + std::to_string(a.checkpointSeconds));
     checkWritable(out);
     const spectra::Database db;
     Scene scene = loadScene(a.scene, [&db](const std::string& ref, const fs::path& base) { return db.resolve(ref, base); });
@@ -99,16 +108,22 @@ void runRender(const RenderArgs& a) {
     fs::path png = out;
     png.replace_extension(".png");
     const double bounces = static_cast<double>(s.stats.scatteringEvents + s.stats.surfaceBounces) / std::max<double>(1.0, static_cast<double>(s.stats.paths));
-    std::printf("{\"image\": \"%s\", \"preview\": \"%s\", \"spp\": %d, \"seconds\": %.3f, \"paths\": %llu, "
-                "\"mean_path_vertices\": %.3f, \"non_finite_samples\": %llu, \"truncated_paths\": %llu, \"cancelled\": %s}\n",
-                out.string().c_str(), png.string().c_str(), s.sppCompleted, s.seconds, static_cast<unsigned long long>(s.stats.paths),
-                bounces, static_cast<unsigned long long>(s.nonFiniteSamples), static_cast<unsigned long long>(s.stats.truncated),
-                s.cancelled ? "true" : "false");
+    const nlohmann::json summary = {{"image", out.string()},
+                                    {"preview", png.string()},
+                                    {"spp", s.sppCompleted},
+                                    {"seconds", s.seconds},
+                                    {"paths", s.stats.paths},
+                                    {"mean_path_vertices", bounces},
+                                    {"non_finite_samples", s.nonFiniteSamples},
+                                    {"truncated_paths", s.stats.truncated},
+                                    {"cancelled", s.cancelled}};
+    std::printf("%s\n", summary.dump().c_str());
+    std::fflush(stdout);
     std::fprintf(stderr, "fluorosim: wrote %s and %s (%d spp in %.1f s)%s\n", out.string().c_str(), png.string().c_str(),
                  s.sppCompleted, s.seconds, s.cancelled ? " -- interrupted, finished passes kept" : "");
     if (s.nonFiniteSamples > 0)
         std::fprintf(stderr, "fluorosim: warning: %llu non-finite samples were dropped\n", static_cast<unsigned long long>(s.nonFiniteSamples));
-    if (s.cancelled) throw Error("render interrupted after " + std::to_string(s.sppCompleted) + " spp (image written)");
+    if (s.cancelled) throw Interrupted("render interrupted after " + std::to_string(s.sppCompleted) + " spp (image written)");
 }
 
 }  // namespace

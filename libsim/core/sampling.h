@@ -1,6 +1,7 @@
 #pragma once
 // Sampling warps with their pdfs. Each sampler has a chi-square test in tests/statistical.
 #include <array>
+#include <cstdint>
 #include <cmath>
 #include <span>
 
@@ -25,11 +26,15 @@ inline double cosineHemispherePdf(double cosTheta) { return cosTheta > 0 ? cosTh
 std::array<double, 2> sampleUniformTriangle(double u1, double u2);
 
 // cos(phi) for phi uniform in [0, 2 pi), without trigonometry (von Neumann 1951): for (x, y)
-// uniform in the unit disk, (x^2 - y^2) / (x^2 + y^2) = cos(2 atan2(y, x)).
+// uniform in the unit disk, (x^2 - y^2) / (x^2 + y^2) = cos(2 atan2(y, x)). Each candidate point takes
+// two 32-bit halves of one 64-bit draw (2^-32 resolution is far below any tally's noise).
 template <class Generator>
 double sampleCosUniformAzimuth(Generator& rng) {
+    constexpr double kScale = 1.0 / 2147483648.0;  // maps [0, 2^32) to [0, 2)
     while (true) {
-        const double x = 2.0 * rng.uniform() - 1.0, y = 2.0 * rng.uniform() - 1.0;
+        const uint64_t bits = rng.next64();
+        const double x = static_cast<double>(bits >> 32) * kScale - 1.0;
+        const double y = static_cast<double>(bits & 0xffffffffu) * kScale - 1.0;
         const double r2 = x * x + y * y;
         if (r2 <= 1.0 && r2 > 0.0) return (x * x - y * y) / r2;
     }

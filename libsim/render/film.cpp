@@ -1,5 +1,6 @@
 #include "render/film.h"
 
+#include <algorithm>
 #include <cmath>
 #include <numeric>
 #include <string>
@@ -16,7 +17,12 @@ Film::Film(int width, int height, double lambdaMin, double lambdaMax, double bin
     if (!(binWidth > 0) || (lambdaMax - lambdaMin) / binWidth > 4000)
         throw ConfigError("spectral bin width must be positive and give at most 4000 bins, got " + std::to_string(binWidth) + " nm");
     const int bins = std::max(1, static_cast<int>(std::ceil((lambdaMax - lambdaMin) / binWidth - 1e-9)));
-    for (int b = 0; b < bins; ++b) binCenters_.push_back(lambdaMin + (b + 0.5) * binWidth);
+    // The last bin ends at lambdaMax even when the range is not a multiple of the bin width.
+    for (int b = 0; b < bins; ++b) {
+        const double lo = lambdaMin + b * binWidth, hi = std::min(lambdaMax, lo + binWidth);
+        binCenters_.push_back(0.5 * (lo + hi));
+        binWidths_.push_back(hi - lo);
+    }
     yIntegral_ = cmf_.y.integral();
     if (!(yIntegral_ > 0)) throw ConfigError("colour matching function y has zero integral");
     const size_t pixels = static_cast<size_t>(width) * static_cast<size_t>(height);
@@ -40,7 +46,7 @@ void Film::addSample(int x, int y, const SampledSpectrum& L, const SampledWavele
         xyz_[3 * pixel + 1] += c * cmf_.y(l) / yIntegral_;
         xyz_[3 * pixel + 2] += c * cmf_.z(l) / yIntegral_;
         const int b = static_cast<int>(std::floor((l - lambdaMin_) / binWidth_));
-        if (b >= 0 && b < bins) spectral_[pixel * static_cast<size_t>(bins) + static_cast<size_t>(b)] += c / binWidth_;
+        if (b >= 0 && b < bins) spectral_[pixel * static_cast<size_t>(bins) + static_cast<size_t>(b)] += c / binWidths_[static_cast<size_t>(b)];
     }
 }
 

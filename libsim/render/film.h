@@ -29,7 +29,7 @@ public:
 private:
     int width_, height_;
     double lambdaMin_, binWidth_;
-    std::vector<double> binCenters_;
+    std::vector<double> binCenters_, binWidths_;
     ColorMatchingFunctions cmf_;
     double yIntegral_;
     std::vector<double> xyz_;       // 3 per pixel

@@ -8,6 +8,10 @@
 namespace fluorosim {
 namespace {
 
+// Intensities are W sr^-1 nm^-1 and distances mm; radiance is W m^-2 sr^-1 nm^-1, so I / d^2
+// is converted from per mm^2 to per m^2.
+constexpr double kMm2PerM2 = 1e6;
+
 double smoothStep(double x, double a, double b) {
     if (a == b) return x < a ? 0.0 : 1.0;
     const double t = std::clamp((x - a) / (b - a), 0.0, 1.0);
@@ -35,7 +39,7 @@ std::optional<LightSample> LightSampler::sample(const Vec3& ref, double uLight, 
         ls.distance = length(d);
         if (!(ls.distance > 0)) return std::nullopt;
         ls.wi = d / ls.distance;
-        ls.L = pl->intensity.sampleEmission(wl) / sqr(ls.distance);
+        ls.L = pl->intensity.sampleEmission(wl) * (kMm2PerM2 / sqr(ls.distance));
         ls.pdf = selectPdf;
         ls.delta = true;
         return ls;
@@ -48,7 +52,7 @@ std::optional<LightSample> LightSampler::sample(const Vec3& ref, double uLight, 
         ls.wi = d / ls.distance;
         const double cosTheta = dot(-ls.wi, sl->direction);
         const double falloff = smoothStep(cosTheta, sl->cosTotalWidth, sl->cosFalloffStart);
-        ls.L = sl->intensity.sampleEmission(wl) * (falloff / sqr(ls.distance));
+        ls.L = sl->intensity.sampleEmission(wl) * (falloff * kMm2PerM2 / sqr(ls.distance));
         ls.pdf = selectPdf;
         ls.delta = true;
         return ls;

@@ -36,7 +36,7 @@ struct AreaLight {
 };
 struct PointLight {
     Vec3 position;
-    Spectrum intensity;  // W sr^-1 nm^-1
+    Spectrum intensity;  // W sr^-1 nm^-1 (lines: W sr^-1); irradiance at d mm is I / (d * 1e-3 m)^2
 };
 struct SpotLight {
     Vec3 position, direction;

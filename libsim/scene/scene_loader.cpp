@@ -31,8 +31,12 @@ public:
     const std::string& path() const { return path_; }
 
     [[noreturn]] void fail(const std::string& what) const {
-        throw ConfigError(file_.string() + ": " + (path_.empty() ? "/" : path_) + ": " + what + " (got " + shortDump(j_) + ")");
+        throw ConfigError(prefix() + what + " (got " + shortDump(j_) + ")");
     }
+    // For messages that already quote the value.
+    [[noreturn]] void failQuoted(const std::string& what) const { throw ConfigError(prefix() + what); }
+    [[noreturn]] void failIo(const std::string& what) const { throw IoError(prefix() + what + " (got " + shortDump(j_) + ")"); }
+    std::string prefix() const { return file_.string() + ": " + (path_.empty() ? "/" : path_) + ": "; }
     bool has(const std::string& key) const { return j_.is_object() && j_.contains(key); }
     Node at(const std::string& key) const {
         if (!j_.is_object()) fail("expected an object");
@@ -85,7 +89,7 @@ public:
         try {
             return parseQuantity(j_.get<std::string>(), dim, "value");
         } catch (const ConfigError& e) {
-            fail(e.what());
+            failQuoted(e.what());
         }
     }
     double positiveQuantity(Dimension dim) const {
@@ -129,6 +133,9 @@ bool startsWithNumber(const std::string& s) {
     return ec == std::errc() && ptr != b;
 }
 
+// References whose values the spectral database already delivers as coefficients in 1/mm.
+bool knownCoefficientUnit(const std::string& reference) { return reference.rfind("solvent-absorption:", 0) == 0; }
+
 enum class SpectrumKind { Reflectance, Coefficient, Emission, Unitless };
 
 class Loader {
@@ -141,6 +148,7 @@ public:
         const Node r(root, "", file_);
         r.allowOnly({"fluorosim_scene", "description", "spectral", "render", "camera", "media", "materials", "shapes", "lights"});
         if (r.at("fluorosim_scene").integer(1, 1000) != 1) r.at("fluorosim_scene").fail("unsupported scene format version (this build reads 1)");
+        if (r.has("description")) r.at("description").str();
         Scene scene;
         if (r.has("spectral")) loadSpectral(r.at("spectral"), scene);
         if (r.has("render")) loadRender(r.at("render"), scene);
@@ -188,6 +196,9 @@ private:
         if (n.raw().is_string()) {
             const std::string s = n.str();
             if (coefficient && startsWithNumber(s)) return checked(n, Spectrum::constant(n.quantity(Dimension::InverseLength)), kind);
+            if (startsWithNumber(s)) n.fail("write a dimensionless value as a JSON number, not a string");
+            if (coefficient && !knownCoefficientUnit(s))
+                n.fail("a coefficient spectrum needs its unit: write {\"reference\": \"" + s + "\", \"unit\": \"/mm\"}");
             return checked(n, Spectrum::tabulated(resolveNamed(n, s)), kind);
         }
         if (!n.raw().is_object()) n.fail("expected a number, a quantity, a spectrum name or a spectrum object");
@@ -211,7 +222,12 @@ private:
         }
         n.allowOnly({"reference", "tabulated", "scale", "unit"});
         double scale = n.has("scale") ? n.at("scale").number(0, 1e30) : 1.0;
-        if (coefficient) {
+        const bool knownUnit = n.has("reference") && n.at("reference").raw().is_string() && knownCoefficientUnit(n.at("reference").str());
+        if (coefficient && knownUnit) {
+            // The database delivers these in 1/mm; a stated unit must agree.
+            if (n.has("unit") && unitScale(n.at("unit").str(), Dimension::InverseLength) != std::optional<double>(1.0))
+                n.at("unit").fail("this reference is in 1/mm; omit \"unit\" or write \"/mm\"");
+        } else if (coefficient) {
             const std::string unit = n.at("unit").str();
             const auto s = unitScale(unit, Dimension::InverseLength);
             if (!s) n.at("unit").fail("expected an inverse length unit such as \"/mm\"");
@@ -245,6 +261,8 @@ private:
     TabulatedSpectrum resolveNamed(const Node& n, const std::string& ref) {
         try {
             return resolve_(ref, baseDir_);
+        } catch (const IoError& e) {
+            n.failIo(e.what());
         } catch (const Error& e) {
             n.fail(e.what());
         }
@@ -352,7 +370,7 @@ private:
                 if (std::string(e.what()).find(file_.string()) == 0) throw;
                 s.fail(e.what());
             } catch (const IoError& e) {
-                s.at("file").fail(e.what());
+                s.at("file").failIo(e.what());
             }
             ShapeInfo info;
             info.name = s.has("name") ? s.at("name").str() : type + " " + std::to_string(i);
@@ -369,7 +387,10 @@ private:
                 const bool dielectric = dielectrics_.count(mn.str()) > 0;
                 if (interface && !dielectric) mn.fail("a shape with interior/exterior media must use a dielectric material or none");
                 if (!interface && dielectric) mn.fail("a dielectric needs \"interior\" and/or \"exterior\" media (their ior set the index ratio)");
-                info.material = it->second;
+                // A dielectric between equal indices does not bend light: treat it as a null interface
+                // so that shadow rays pass.
+                const bool matched = interface && scene.ior(info.insideMedium) == scene.ior(info.outsideMedium);
+                info.material = dielectric && matched ? kNone : it->second;
             } else if (interface && scene.ior(info.insideMedium) != scene.ior(info.outsideMedium)) {
                 // Index mismatch with no material given: a smooth dielectric interface.
                 info.material = static_cast<int>(scene.materials.size());
@@ -438,6 +459,7 @@ private:
         if (!res.raw().is_array() || res.size() != 2) res.fail("expected [width, height]");
         c.width = res.at(0).integer(1, 16384);
         c.height = res.at(1).integer(1, 16384);
+        if (static_cast<int64_t>(c.width) * c.height > (int64_t(1) << 26)) res.fail("at most 2^26 pixels");
         if (n.has("medium")) c.medium = mediumRef(n.at("medium"));
     }
 

@@ -13,6 +13,8 @@ namespace fluorosim {
 namespace {
 
 constexpr double kRho = 0.6, kPower = 5.0, kHeight = 2.0, kLine = 532.0;
+// Heights are in mm; radiance is per m^2.
+constexpr double kHeightM2 = kHeight * kHeight * 1e-6;
 
 Scene planeScene(Light light) {
     Scene scene;
@@ -58,7 +60,7 @@ double binValue(const Scene& scene, double lambda, int spp) {
 TEST(Lights, PointLightLineOnLambertianPlane) {
     const Scene scene = planeScene(PointLight{Vec3(0, kHeight, 0), Spectrum::lines({{kLine, kPower}})});
     // Direct lighting only (one bounce back to the camera); indirect light escapes to infinity.
-    const double expected = kRho * kPower / (kPi * kHeight * kHeight);
+    const double expected = kRho * kPower / (kPi * kHeightM2);
     EXPECT_NEAR(binValue(scene, kLine, 64), expected, 1e-6 * expected);
 }
 
@@ -70,7 +72,7 @@ TEST(Lights, SpotLightFalloffAndCone) {
                          std::cos(start * kPi / 180)};
     };
     const double cos3 = std::pow(kHeight / std::hypot(kHeight, x0), 3);
-    const double full = kRho * kPower * cos3 / (kPi * kHeight * kHeight);
+    const double full = kRho * kPower * cos3 / (kPi * kHeightM2);
     // The pixel footprint (1e-4 mm) times the off-axis gradient of the closed form (< 1 /mm) bounds
     // the deviation at 1e-4 relative.
     const double tol = 1e-4 * full;
@@ -93,7 +95,7 @@ TEST(Lights, ContinuousAndLineEmittersTogether) {
     opt.spp = 20000;
     render(mixed, film, opt);
     const ExrImage img = film.image(opt.spp);
-    const double geom = kRho / (kPi * kHeight * kHeight);
+    const double geom = kRho / (kPi * kHeightM2);
     double lineBin = 0, otherMean = 0;
     int others = 0;
     for (size_t b = 0; b < img.spectral[0].wavelengthsNm.size(); ++b) {

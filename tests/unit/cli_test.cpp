@@ -212,6 +212,25 @@ TEST(Cli, TinyRenderWritesExrAndPng) {
         EXPECT_FALSE(contains(e.path().filename().string(), "write-test")) << e.path();
 }
 
+TEST(Cli, InterruptWritesFinishedPassesAndExits130) {
+    // A render far longer than the test; SIGINT after one second must stop it after the current pass,
+    // write the finished passes (image + preview) and exit with 130.
+    const TempDir dir;
+    const auto scene = dir.write("scene.json", sceneJson(64, 64, 100000));
+    const fs::path out = dir.path() / "long.exr", rc = dir.path() / "rc.txt";
+    const std::string cmd = "bash -c " + quote(quote(FLUOROSIM_CLI) + " render " + quote(scene.string()) + " -o " + quote(out.string()) +
+                                               " --threads 2 </dev/null >/dev/null 2>" + quote((dir.path() / "err.txt").string()) +
+                                               " & pid=$!; sleep 1.5; kill -INT $pid; wait $pid; echo $? > " + quote(rc.string()));
+    const auto start = std::chrono::steady_clock::now();
+    ASSERT_EQ(std::system(cmd.c_str()), 0);
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    EXPECT_LT(seconds, 60.0) << "the render did not stop promptly";
+    EXPECT_EQ(std::stoi(readFile(rc)), 130) << readFile(dir.path() / "err.txt");
+    ASSERT_TRUE(fs::exists(out));
+    EXPECT_TRUE(fs::exists(dir.path() / "long.png"));
+    EXPECT_TRUE(contains(readFile(dir.path() / "err.txt"), "interrupted")) << readFile(dir.path() / "err.txt");
+}
+
 // ---- validate slab ----
 
 const std::vector<std::string> kSlabBase = {"validate", "slab", "--photons", "1e4", "--quiet", "--threads", "1"};

@@ -418,3 +418,47 @@ TEST(SceneLoader, NegativeRenderSpp) {
 
 }  // namespace
 }  // namespace fluorosim
+
+namespace fluorosim {
+namespace {
+
+TEST(SceneLoaderSemantics, CoefficientReferencesNeedTheirUnit) {
+    // A CSV or database spectrum used as a coefficient must state its unit; water absorption is known.
+    json j = minimalScene();
+    j["media"]["water"]["sigma_a"] = "filter:chroma_ET525-36m";
+    expectRejected(j, {"/media/water/sigma_a", "needs its unit"});
+    json k = minimalScene();
+    k["media"]["water"]["sigma_a"] = "solvent-absorption:water";
+    EXPECT_NO_THROW(load(k));
+    json m = minimalScene();
+    m["media"]["water"]["sigma_a"] = {{"reference", "solvent-absorption:water"}, {"unit", "/m"}};
+    expectRejected(m, {"/media/water/sigma_a/unit", "1/mm"});
+    json q = minimalScene();
+    q["materials"]["white"]["reflectance"] = "0.5";
+    expectRejected(q, {"/materials/white/reflectance", "JSON number"});
+}
+
+TEST(SceneLoaderSemantics, DielectricBetweenEqualIndicesIsANullInterface) {
+    json j = minimalScene();
+    j["media"]["water"]["ior"] = 1.0;  // the ball's exterior is vacuum (n = 1)
+    const Scene scene = load(j);
+    EXPECT_EQ(scene.shapes[1].material, kNone);
+    EXPECT_TRUE(scene.shapes[1].isInterface);
+    const Scene glass = load(minimalScene());
+    EXPECT_NE(glass.shapes[1].material, kNone);
+}
+
+TEST(SceneLoaderSemantics, MissingMeshIsAnIoErrorNamingTheField) {
+    json j = minimalScene();
+    j["shapes"][0] = {{"type", "mesh"}, {"file", "no_such_mesh.obj"}, {"unit", "mm"}, {"material", "white"}};
+    try {
+        load(j);
+        FAIL() << "expected IoError";
+    } catch (const IoError& e) {
+        EXPECT_TRUE(contains(e.what(), "/shapes/0/file")) << e.what();
+        EXPECT_TRUE(contains(e.what(), "no_such_mesh.obj")) << e.what();
+    }
+}
+
+}  // namespace
+}  // namespace fluorosim
