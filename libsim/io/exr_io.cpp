@@ -25,7 +25,8 @@ namespace fluorosim {
 namespace {
 
 constexpr const char* kSpectralLayoutVersion = "1.0";
-constexpr const char* kEmissiveUnits = "W.m^-2.sr^-1.nm^-1";
+// As written by the layout's reference implementation and pbrt-v4; the S0 channels hold values per nm.
+constexpr const char* kEmissiveUnits = "W.m^-2.sr^-1";
 
 std::string writeError(const std::string& path, const std::string& reason) {
     return path + ": cannot write OpenEXR file: " + reason;

@@ -33,26 +33,17 @@ std::optional<LightSample> LightSampler::sample(const Vec3& ref, double uLight, 
     const double selectPdf = 1.0 / static_cast<double>(count);
     const Light& light = scene_.lights[index];
     LightSample ls;
-    if (const auto* pl = std::get_if<PointLight>(&light)) {
-        ls.p = pl->position;
+    const PointLight* pl = std::get_if<PointLight>(&light);
+    const SpotLight* sl = std::get_if<SpotLight>(&light);
+    if (pl || sl) {
+        // Delta lights: irradiance I / d^2, with the spot's smoothstep falloff towards its cone edge.
+        ls.p = pl ? pl->position : sl->position;
         const Vec3 d = ls.p - ref;
         ls.distance = length(d);
         if (!(ls.distance > 0)) return std::nullopt;
         ls.wi = d / ls.distance;
-        ls.L = pl->intensity.sampleEmission(wl) * (kMm2PerM2 / sqr(ls.distance));
-        ls.pdf = selectPdf;
-        ls.delta = true;
-        return ls;
-    }
-    if (const auto* sl = std::get_if<SpotLight>(&light)) {
-        ls.p = sl->position;
-        const Vec3 d = ls.p - ref;
-        ls.distance = length(d);
-        if (!(ls.distance > 0)) return std::nullopt;
-        ls.wi = d / ls.distance;
-        const double cosTheta = dot(-ls.wi, sl->direction);
-        const double falloff = smoothStep(cosTheta, sl->cosTotalWidth, sl->cosFalloffStart);
-        ls.L = sl->intensity.sampleEmission(wl) * (falloff * kMm2PerM2 / sqr(ls.distance));
+        const double falloff = sl ? smoothStep(dot(-ls.wi, sl->direction), sl->cosTotalWidth, sl->cosFalloffStart) : 1.0;
+        ls.L = (pl ? pl->intensity : sl->intensity).sampleEmission(wl) * (falloff * kMm2PerM2 / sqr(ls.distance));
         ls.pdf = selectPdf;
         ls.delta = true;
         return ls;

@@ -14,6 +14,8 @@
 #include <string>
 #include <vector>
 
+#include "io/image_io.h"
+
 namespace fluorosim {
 namespace {
 
@@ -229,6 +231,18 @@ TEST(Cli, InterruptWritesFinishedPassesAndExits130) {
     ASSERT_TRUE(fs::exists(out));
     EXPECT_TRUE(fs::exists(dir.path() / "long.png"));
     EXPECT_TRUE(contains(readFile(dir.path() / "err.txt"), "interrupted")) << readFile(dir.path() / "err.txt");
+}
+
+TEST(Cli, RenderIsIdenticalOnOneAndTwoThreads) {
+    const TempDir dir;
+    const auto scene = dir.write("scene.json", sceneJson(16, 12, 4));
+    const fs::path a = dir.path() / "a.exr", b = dir.path() / "b.exr";
+    ASSERT_EQ(runCli(dir, {"render", scene.string(), "-o", a.string(), "--threads", "1", "--seed", "9"}).exitCode, 0);
+    ASSERT_EQ(runCli(dir, {"render", scene.string(), "-o", b.string(), "--threads", "2", "--seed", "9"}).exitCode, 0);
+    const ExrChannels ea = readExr(a.string()), eb = readExr(b.string());
+    ASSERT_EQ(ea.channels.size(), eb.channels.size());
+    EXPECT_GT(ea.channels.size(), 3u);  // R, G, B and spectral channels
+    for (const auto& [name, values] : ea.channels) EXPECT_EQ(values, eb.channels.at(name)) << name;
 }
 
 // ---- validate slab ----
