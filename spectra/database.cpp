@@ -226,6 +226,17 @@ DyeRecord Database::dye(const std::string& nameOrAlias) const {
     throw ConfigError("unknown dye \"" + nameOrAlias + "\"" + suggestion(nameOrAlias, ids));
 }
 
+Fluorophore Database::fluorophore(const std::string& nameOrAlias, std::optional<double> extinctionPeak,
+                                  std::optional<double> quantumYield) const {
+    const DyeRecord rec = dye(nameOrAlias);
+    const std::optional<double> ec = extinctionPeak ? extinctionPeak : rec.extinctionPeak;
+    const std::optional<double> qy = quantumYield ? quantumYield : rec.quantumYield;
+    if (!ec)
+        throw ConfigError("dye \"" + rec.id + "\" has no sourced peak extinction coefficient in dyes.json; give \"extinction_peak_M-1cm-1\"");
+    if (!qy) throw ConfigError("dye \"" + rec.id + "\" has no sourced quantum yield in dyes.json; give \"quantum_yield\"");
+    return Fluorophore(rec.id, rec.excitation, *ec, rec.emission, *qy);
+}
+
 TabulatedSpectrum Database::resolve(const std::string& reference, const fs::path& relativeTo) const {
     const auto colon = reference.find(':');
     const std::string kind = colon == std::string::npos ? "" : reference.substr(0, colon);

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "media/fluorophore.h"
 #include "spectral/color.h"
 #include "spectral/tabulated_spectrum.h"
 
@@ -38,6 +39,10 @@ public:
     // Solvent absorption in 1/mm (water: Pope & Fry 1997 with the unattributed 350-370/710-800 nm rows).
     TabulatedSpectrum solventAbsorption(const std::string& name) const;
     DyeRecord dye(const std::string& nameOrAlias) const;
+    // The dye as a Fluorophore; `extinctionPeak` (M^-1 cm^-1) and `quantumYield` override the table, and
+    // are required where dyes.json has no sourced value (null). Throws ConfigError.
+    Fluorophore fluorophore(const std::string& nameOrAlias, std::optional<double> extinctionPeak = std::nullopt,
+                            std::optional<double> quantumYield = std::nullopt) const;
     std::vector<std::string> dyeIds() const;
     std::vector<std::string> filterNames() const;
 

@@ -79,7 +79,10 @@ void runRender(const RenderArgs& a) {
     if (!(a.checkpointSeconds > 0)) throw ConfigError("--checkpoint-seconds: must be positive, got " + std::to_string(a.checkpointSeconds));
     checkWritable(out);
     const spectra::Database db;
-    Scene scene = loadScene(a.scene, [&db](const std::string& ref, const fs::path& base) { return db.resolve(ref, base); });
+    Scene scene = loadScene(
+        a.scene, [&db](const std::string& ref, const fs::path& base) { return db.resolve(ref, base); },
+        [&db](const std::string& name, std::optional<double> ec, std::optional<double> qy) { return db.fluorophore(name, ec, qy); });
+    for (const std::string& w : scene.warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
     if (a.seed) scene.render.seed = *a.seed;
     RenderOptions opt;
     opt.spp = a.spp.value_or(scene.render.spp);

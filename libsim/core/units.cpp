@@ -32,6 +32,9 @@ const char* dimensionName(Dimension d) {
         case Dimension::InverseLength: return "a coefficient (e.g. \"90 /cm\")";
         case Dimension::Wavelength: return "a wavelength (e.g. \"550 nm\")";
         case Dimension::Dimensionless: return "a number";
+        case Dimension::MolarConcentration: return "a concentration (e.g. \"10 uM\")";
+        case Dimension::MassConcentration: return "a mass concentration (e.g. \"0.1 g/L\")";
+        case Dimension::MolarMass: return "a molar mass (e.g. \"643.4 g/mol\")";
     }
     return "?";
 }
@@ -56,6 +59,25 @@ std::optional<double> unitScale(std::string_view unit, Dimension dim) {
             return 1.0 / *l;
         }
         case Dimension::Dimensionless: return unit.empty() ? std::optional<double>(1.0) : std::nullopt;
+        case Dimension::MolarConcentration: {
+            if (unit == "M" || unit == "mol/L") return 1.0;
+            if (unit == "mM" || unit == "mmol/L") return 1e-3;
+            if (unit == "uM" || unit == "µM" || unit == "umol/L") return 1e-6;
+            if (unit == "nM" || unit == "nmol/L") return 1e-9;
+            if (unit == "pM") return 1e-12;
+            return std::nullopt;
+        }
+        case Dimension::MassConcentration: {
+            if (unit == "g/L" || unit == "mg/mL") return 1.0;
+            if (unit == "mg/L" || unit == "ug/mL" || unit == "µg/mL") return 1e-3;
+            if (unit == "ug/L" || unit == "µg/L") return 1e-6;
+            return std::nullopt;
+        }
+        case Dimension::MolarMass: {
+            if (unit == "g/mol" || unit == "Da") return 1.0;
+            if (unit == "kg/mol" || unit == "kDa") return 1e3;
+            return std::nullopt;
+        }
     }
     return std::nullopt;
 }

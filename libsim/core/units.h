@@ -7,7 +7,8 @@
 
 namespace fluorosim {
 
-enum class Dimension { Length, InverseLength, Wavelength, Dimensionless };
+// Internal units: mm, 1/mm, nm; concentrations in mol/L, mass concentrations in g/L, molar masses in g/mol.
+enum class Dimension { Length, InverseLength, Wavelength, Dimensionless, MolarConcentration, MassConcentration, MolarMass };
 
 const char* dimensionName(Dimension d);
 

@@ -1,5 +1,6 @@
 #include "media/medium.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "core/errors.h"
@@ -18,8 +19,15 @@ void checkCoefficient(const std::string& medium, const char* field, const Spectr
 
 }  // namespace
 
-HomogeneousMedium::HomogeneousMedium(std::string name, Spectrum sigmaA, Spectrum sigmaS, double g, double ior)
-    : name_(std::move(name)), sigmaA_(std::move(sigmaA)), sigmaS_(std::move(sigmaS)), phase_(0.0), ior_(ior) {
+HomogeneousMedium::HomogeneousMedium(std::string name, Spectrum sigmaA, Spectrum sigmaS, double g, double ior,
+                                     std::vector<DyeComponent> dyes)
+    : name_(std::move(name)), sigmaA_(std::move(sigmaA)), sigmaS_(std::move(sigmaS)), dyes_(std::move(dyes)), phase_(0.0), ior_(ior) {
+    for (const DyeComponent& d : dyes_) {
+        if (!(d.molar >= 0) || !std::isfinite(d.molar))
+            throw ConfigError("medium \"" + name_ + "\": concentration of \"" + d.dye.id() + "\" must be finite and non-negative, got " +
+                              std::to_string(d.molar) + " M");
+        molar_.push_back(d.molar);
+    }
     checkCoefficient(name_, "sigma_a", sigmaA_);
     checkCoefficient(name_, "sigma_s", sigmaS_);
     if (!(g > -1 && g < 1))
@@ -27,7 +35,8 @@ HomogeneousMedium::HomogeneousMedium(std::string name, Spectrum sigmaA, Spectrum
     phase_ = HenyeyGreenstein(g);
     if (!(ior >= 1.0) || !std::isfinite(ior))
         throw ConfigError("medium \"" + name_ + "\": ior must be finite and >= 1, got " + std::to_string(ior));
-    vacuum_ = sigmaA_.maxValue() == 0 && sigmaS_.maxValue() == 0;
+    vacuum_ = sigmaA_.maxValue() == 0 && sigmaS_.maxValue() == 0 &&
+              std::all_of(molar_.begin(), molar_.end(), [](double c) { return c == 0.0; });
 }
 
 }  // namespace fluorosim

@@ -74,6 +74,7 @@ struct Scene {
     Camera camera;
     SpectralSettings spectral;
     RenderSettings render;
+    std::vector<std::string> warnings;  // things the user must know that are not errors
 
     // Refractive index on each side of an interface (1 where no medium is given).
     double ior(int medium) const { return medium == kNone ? 1.0 : media[static_cast<size_t>(medium)].ior(); }

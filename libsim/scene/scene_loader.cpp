@@ -140,7 +140,7 @@ enum class SpectrumKind { Reflectance, Coefficient, Emission, Unitless };
 
 class Loader {
 public:
-    Loader(const fs::path& file, const SpectrumResolver& resolve) : file_(file), resolve_(resolve) {
+    Loader(const fs::path& file, const SpectrumResolver& resolve, const DyeResolver& dyes) : file_(file), resolve_(resolve), dyes_(dyes) {
         baseDir_ = file.has_parent_path() ? file.parent_path() : fs::path(".");
     }
 
@@ -283,14 +283,62 @@ private:
         n.requireObject();
         for (auto it = n.raw().begin(); it != n.raw().end(); ++it) {
             const Node m(it.value(), n.path() + "/" + it.key(), file_);
-            m.allowOnly({"sigma_a", "sigma_s", "g", "ior"});
+            m.allowOnly({"sigma_a", "sigma_s", "g", "ior", "dyes"});
             const Spectrum sa = m.has("sigma_a") ? spectrum(m.at("sigma_a"), SpectrumKind::Coefficient) : Spectrum::constant(0);
             const Spectrum ss = m.has("sigma_s") ? spectrum(m.at("sigma_s"), SpectrumKind::Coefficient) : Spectrum::constant(0);
             const double g = m.has("g") ? m.at("g").number(-1, 1, true, true) : 0.0;
             const double ior = m.has("ior") ? m.at("ior").number(1, 10) : 1.0;
+            std::vector<DyeComponent> dyes;
+            if (m.has("dyes")) dyes = loadDyes(m.at("dyes"), it.key(), scene);
             mediumIndex_[it.key()] = static_cast<int>(scene.media.size());
-            scene.media.emplace_back(it.key(), sa, ss, g, ior);
+            scene.media.emplace_back(it.key(), sa, ss, g, ior, std::move(dyes));
         }
+    }
+
+    // [{"dye": "AF488", "concentration": "10 uM"}, {"dye": "...", "concentration": "0.1 g/L", "molar_mass": "643.4 g/mol"}]
+    std::vector<DyeComponent> loadDyes(const Node& n, const std::string& medium, Scene& scene) {
+        if (!n.raw().is_array()) n.fail("expected an array of dyes");
+        if (!dyes_) n.fail("no dye database is available to this loader");
+        std::vector<DyeComponent> out;
+        for (size_t i = 0; i < n.size(); ++i) {
+            const Node d = n.at(i);
+            d.allowOnly({"dye", "concentration", "molar_mass", "extinction_peak_M-1cm-1", "quantum_yield"});
+            const std::optional<double> epsilon =
+                d.has("extinction_peak_M-1cm-1") ? std::optional(d.at("extinction_peak_M-1cm-1").number(0, 1e7, true)) : std::nullopt;
+            const std::optional<double> qy = d.has("quantum_yield") ? std::optional(d.at("quantum_yield").number(0, 1)) : std::nullopt;
+            std::optional<Fluorophore> dye;
+            try {
+                dye = dyes_(d.at("dye").str(), epsilon, qy);
+            } catch (const IoError& e) {
+                d.at("dye").failIo(e.what());
+            } catch (const Error& e) {
+                d.at("dye").fail(e.what());
+            }
+            out.push_back({*dye, concentration(d)});
+        }
+        if (!out.empty())
+            scene.warnings.push_back("medium \"" + medium + "\" holds dyes: this build simulates their absorption only; fluorescent "
+                                     "re-emission is not simulated yet");
+        return out;
+    }
+
+    // Molar ("10 uM") or mass concentration ("0.1 g/L", which needs "molar_mass"), in mol/L.
+    static double concentration(const Node& d) {
+        const Node c = d.at("concentration");
+        const std::string text = c.str();
+        for (Dimension dim : {Dimension::MolarConcentration, Dimension::MassConcentration}) {
+            const auto space = text.find_first_not_of("0123456789.eE+- ");
+            if (space == std::string::npos || !unitScale(text.substr(space), dim)) continue;
+            const double v = c.quantity(dim);
+            if (v < 0) c.fail("concentration must be non-negative");
+            if (dim == Dimension::MolarConcentration) {
+                if (d.has("molar_mass")) d.at("molar_mass").fail("a molar mass is only used with a mass concentration such as \"g/L\"");
+                return v;
+            }
+            if (!d.has("molar_mass")) c.fail("a mass concentration needs \"molar_mass\" (e.g. \"643.4 g/mol\")");
+            return v / d.at("molar_mass").positiveQuantity(Dimension::MolarMass);
+        }
+        c.fail("expected a concentration such as \"10 uM\", \"1 mM\", \"5 nM\" or \"0.1 g/L\" with \"molar_mass\"");
     }
 
     void loadMaterials(const Node& n, Scene& scene) {
@@ -466,6 +514,7 @@ private:
     const fs::path& file_;
     fs::path baseDir_;
     const SpectrumResolver& resolve_;
+    const DyeResolver& dyes_;
     std::map<std::string, int> mediumIndex_, materialIndex_;
     std::set<std::string> dielectrics_;
     double lambdaMin_ = 300, lambdaMax_ = 800;
@@ -473,22 +522,22 @@ private:
 
 }  // namespace
 
-Scene loadSceneFromString(const std::string& text, const fs::path& file, const SpectrumResolver& resolve) {
+Scene loadSceneFromString(const std::string& text, const fs::path& file, const SpectrumResolver& resolve, const DyeResolver& dyes) {
     json root;
     try {
         root = json::parse(text);
     } catch (const json::parse_error& e) {
         throw ConfigError(file.string() + ": malformed JSON: " + e.what());
     }
-    return Loader(file, resolve).load(root);
+    return Loader(file, resolve, dyes).load(root);
 }
 
-Scene loadScene(const fs::path& file, const SpectrumResolver& resolve) {
+Scene loadScene(const fs::path& file, const SpectrumResolver& resolve, const DyeResolver& dyes) {
     std::ifstream in(file);
     if (!in) throw IoError(file.string() + ": cannot open scene file");
     std::stringstream ss;
     ss << in.rdbuf();
-    return loadSceneFromString(ss.str(), file, resolve);
+    return loadSceneFromString(ss.str(), file, resolve, dyes);
 }
 
 }  // namespace fluorosim

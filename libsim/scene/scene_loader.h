@@ -3,8 +3,10 @@
 // errors are ConfigError/IoError messages of the form "<file>: <json path>: <problem> (got <value>)".
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <string>
 
+#include "media/fluorophore.h"
 #include "scene/scene.h"
 #include "spectral/tabulated_spectrum.h"
 
@@ -14,8 +16,13 @@ namespace fluorosim {
 // Provided by the spectral database (spectra/), which libsim does not depend on.
 using SpectrumResolver = std::function<TabulatedSpectrum(const std::string& reference, const std::filesystem::path& baseDir)>;
 
-Scene loadScene(const std::filesystem::path& file, const SpectrumResolver& resolve);
+// Looks a dye up by name or alias (the spectral database); throws ConfigError with suggestions.
+using DyeResolver = std::function<Fluorophore(const std::string& name, std::optional<double> extinctionPeak,
+                                              std::optional<double> quantumYield)>;
+
+Scene loadScene(const std::filesystem::path& file, const SpectrumResolver& resolve, const DyeResolver& dyes = {});
 // Same, from a JSON text; `file` is used for messages and relative paths.
-Scene loadSceneFromString(const std::string& text, const std::filesystem::path& file, const SpectrumResolver& resolve);
+Scene loadSceneFromString(const std::string& text, const std::filesystem::path& file, const SpectrumResolver& resolve,
+                          const DyeResolver& dyes = {});
 
 }  // namespace fluorosim

@@ -69,14 +69,21 @@ json minimalScene() {
     })");
 }
 
-Scene load(const json& j) { return loadSceneFromString(j.dump(), kSceneFile, resolver()); }
+const DyeResolver& dyeResolver() {
+    static const DyeResolver r = [](const std::string& name, std::optional<double> ec, std::optional<double> qy) {
+        return db().fluorophore(name, ec, qy);
+    };
+    return r;
+}
+
+Scene load(const json& j) { return loadSceneFromString(j.dump(), kSceneFile, resolver(), dyeResolver()); }
 
 bool contains(const std::string& haystack, const std::string& needle) { return haystack.find(needle) != std::string::npos; }
 
 // Loading must fail with ConfigError (or IoError when allowed) whose message contains every part.
 void expectRejectedText(const std::string& text, const std::vector<std::string>& parts, bool ioErrorAllowed = false) {
     try {
-        loadSceneFromString(text, kSceneFile, resolver());
+        loadSceneFromString(text, kSceneFile, resolver(), dyeResolver());
         ADD_FAILURE() << "the scene was accepted";
     } catch (const ConfigError& e) {
         const std::string msg = e.what();
@@ -458,6 +465,43 @@ TEST(SceneLoaderSemantics, MissingMeshIsAnIoErrorNamingTheField) {
         EXPECT_TRUE(contains(e.what(), "/shapes/0/file")) << e.what();
         EXPECT_TRUE(contains(e.what(), "no_such_mesh.obj")) << e.what();
     }
+}
+
+}  // namespace
+}  // namespace fluorosim
+
+namespace fluorosim {
+namespace {
+
+TEST(SceneLoaderDyes, MolarAndMassConcentrations) {
+    json j = minimalScene();
+    j["media"]["water"]["dyes"] = json::array({{{"dye", "AF488"}, {"concentration", "10 uM"}},
+                                               {{"dye", "Alexa Fluor 568"}, {"concentration", "0.5 g/L"}, {"molar_mass", "791.8 g/mol"}}});
+    const Scene scene = load(j);
+    const auto& dyes = scene.media[1].dyes();
+    ASSERT_EQ(dyes.size(), 2u);
+    EXPECT_EQ(dyes[0].dye.id(), "alexa_fluor_488");
+    EXPECT_DOUBLE_EQ(dyes[0].molar, 1e-5);
+    EXPECT_DOUBLE_EQ(dyes[1].molar, 0.5 / 791.8);
+    ASSERT_EQ(scene.warnings.size(), 1u);
+    EXPECT_TRUE(contains(scene.warnings[0], "re-emission is not simulated")) << scene.warnings[0];
+}
+
+TEST(SceneLoaderDyes, BadDyeInput) {
+    auto withDye = [](json dye) {
+        json j = minimalScene();
+        j["media"]["water"]["dyes"] = json::array({dye});
+        return j;
+    };
+    expectRejected(withDye({{"dye", "AF489"}, {"concentration", "1 uM"}}), {"/media/water/dyes/0/dye", "alexa_fluor_488"});
+    expectRejected(withDye({{"dye", "AF488"}, {"concentration", "-1 uM"}}), {"/media/water/dyes/0/concentration", "non-negative"});
+    expectRejected(withDye({{"dye", "AF488"}, {"concentration", "0.1 g/L"}}), {"/media/water/dyes/0/concentration", "molar_mass"});
+    expectRejected(withDye({{"dye", "AF488"}, {"concentration", "10 mm"}}), {"/media/water/dyes/0/concentration", "10 mm"});
+    expectRejected(withDye({{"dye", "AF488"}, {"concentration", "1 uM"}, {"quantum_yield", 1.2}}), {"/media/water/dyes/0/quantum_yield"});
+    expectRejected(withDye({{"dye", "alexa_fluor_350"}, {"concentration", "1 uM"}}), {"/media/water/dyes/0/dye", "extinction"});
+    EXPECT_NO_THROW(load(withDye({{"dye", "alexa_fluor_350"}, {"concentration", "1 uM"}, {"extinction_peak_M-1cm-1", 19000}, {"quantum_yield", 0.5}})));
+    // Zero concentration is legal.
+    EXPECT_NO_THROW(load(withDye({{"dye", "AF488"}, {"concentration", "0 M"}})));
 }
 
 }  // namespace
