@@ -27,6 +27,18 @@ constexpr double kSurvival = 0.1;
 
 struct Tally {
     double r = 0, r2 = 0, t = 0, t2 = 0, ballistic = 0;
+    double rf = 0, rf2 = 0, tf = 0, tf2 = 0;
+};
+
+// Per-band constants of the collision step.
+struct BandPhysics {
+    HenyeyGreenstein phase;
+    double mut;        // total extinction
+    double survival;   // (mus + muaDye) / mut: weight kept by implicit capture of the other absorption
+    double pDye;       // probability that a surviving collision is a dye absorption
+    explicit BandPhysics(const SlabBand& b)
+        : phase(b.g), mut(b.mua + b.mus + b.muaDye), survival(mut > 0 ? (b.mus + b.muaDye) / mut : 0.0),
+          pDye(b.mus + b.muaDye > 0 ? b.muaDye / (b.mus + b.muaDye) : 0.0) {}
 };
 
 void requireFinite(const char* name, double v, bool allowZero) {
@@ -40,8 +52,18 @@ void requireFinite(const char* name, double v, bool allowZero) {
 void SlabOptions::validate() const {
     requireFinite("mua", mua, true);
     requireFinite("mus", mus, true);
+    requireFinite("mua-dye", muaDye, true);
     requireFinite("thickness", thickness, false);
     if (!(g > -1 && g < 1)) throw ConfigError("--g: must lie in (-1, 1), got " + std::to_string(g));
+    if (!(quantumYield >= 0 && quantumYield <= 1))
+        throw ConfigError("--quantum-yield: must lie in [0, 1], got " + std::to_string(quantumYield));
+    if (emission) {
+        requireFinite("mua-emission", emission->mua, true);
+        requireFinite("mus-emission", emission->mus, true);
+        requireFinite("mua-dye-emission", emission->muaDye, true);
+        if (!(emission->g > -1 && emission->g < 1))
+            throw ConfigError("--g-emission: must lie in (-1, 1), got " + std::to_string(emission->g));
+    }
     for (auto [name, v] : {std::pair{"n", n}, {"n-above", nAbove}, {"n-below", nBelow}})
         if (!std::isfinite(v) || v < 1.0 || v > 10.0)
             throw ConfigError(std::string("--") + name + ": refractive index must lie in [1, 10], got " + std::to_string(v));
@@ -53,9 +75,7 @@ void SlabOptions::validate() const {
 SlabResult simulateSlab(const SlabOptions& opt, const std::function<void(uint64_t, uint64_t)>& progress) {
     opt.validate();
     const auto start = std::chrono::steady_clock::now();
-    const HenyeyGreenstein phase(opt.g);
-    const double mut = opt.mua + opt.mus;
-    const double albedo = mut > 0 ? opt.mus / mut : 0.0;
+    const BandPhysics bands[2] = {BandPhysics(opt.excitation()), BandPhysics(opt.emissionBand())};
     const double d = opt.thickness;
     const double rsp = sqr((opt.nAbove - opt.n) / (opt.nAbove + opt.n));
 
@@ -75,25 +95,36 @@ SlabResult simulateSlab(const SlabOptions& opt, const std::function<void(uint64_
             double z = 0.0, uz = 1.0;
             double w = 1.0 - rsp;
             bool scattered = false;
+            int band = 0;  // 0: excitation (elastic light), 1: emission (fluorescence)
             while (true) {
+                const BandPhysics& b = bands[band];
                 const double tBoundary = uz > 0 ? (d - z) / uz : uz < 0 ? -z / uz : std::numeric_limits<double>::infinity();
                 double tCollision = -1;
-                sampleTmaj<double>(HomogeneousMajorantIterator<double>(0.0, tBoundary, mut), rng,
+                sampleTmaj<double>(HomogeneousMajorantIterator<double>(0.0, tBoundary, b.mut), rng,
                                    [&](double t, double, double) {
                                        tCollision = t;
                                        return false;
                                    });
                 if (tCollision >= 0) {
                     z += uz * tCollision;
-                    // Implicit capture: the absorbed fraction leaves the weight, the scattered one goes on.
-                    w *= albedo;
+                    // Implicit capture of the non-dye absorption; then scattering or dye absorption,
+                    // chosen in proportion to their coefficients.
+                    w *= b.survival;
+                    const bool dyeEvent = b.pDye > 0 && rng.uniform() < b.pDye;
+                    if (dyeEvent) w *= opt.quantumYield;
                     if (w < kWeightThreshold) {
                         if (w == 0.0 || rng.uniform() >= kSurvival) break;
                         w /= kSurvival;
                     }
-                    const double cosTheta = phase.sampleCos(rng.uniform());
-                    const double sinTheta = safeSqrt(1.0 - cosTheta * cosTheta);
-                    uz = std::clamp(uz * cosTheta + safeSqrt(1.0 - uz * uz) * sinTheta * sampleCosUniformAzimuth(rng), -1.0, 1.0);
+                    if (dyeEvent) {
+                        // Isotropic re-emission into the emission band.
+                        band = 1;
+                        uz = 1.0 - 2.0 * rng.uniform();
+                    } else {
+                        const double cosTheta = b.phase.sampleCos(rng.uniform());
+                        const double sinTheta = safeSqrt(1.0 - cosTheta * cosTheta);
+                        uz = std::clamp(uz * cosTheta + safeSqrt(1.0 - uz * uz) * sinTheta * sampleCosUniformAzimuth(rng), -1.0, 1.0);
+                    }
                     scattered = true;
                     continue;
                 }
@@ -104,14 +135,11 @@ SlabResult simulateSlab(const SlabOptions& opt, const std::function<void(uint64_
                     uz = -uz;
                     continue;
                 }
-                if (uz < 0) {
-                    tally.r += w;
-                    tally.r2 += w * w;
-                } else {
-                    tally.t += w;
-                    tally.t2 += w * w;
-                    if (!scattered) tally.ballistic += w;
-                }
+                double& sum = uz < 0 ? (band == 0 ? tally.r : tally.rf) : (band == 0 ? tally.t : tally.tf);
+                double& sum2 = uz < 0 ? (band == 0 ? tally.r2 : tally.rf2) : (band == 0 ? tally.t2 : tally.tf2);
+                sum += w;
+                sum2 += w * w;
+                if (uz > 0 && band == 0 && !scattered) tally.ballistic += w;
                 break;
             }
         }
@@ -130,6 +158,10 @@ SlabResult simulateSlab(const SlabOptions& opt, const std::function<void(uint64_
         sum.t += t.t;
         sum.t2 += t.t2;
         sum.ballistic += t.ballistic;
+        sum.rf += t.rf;
+        sum.rf2 += t.rf2;
+        sum.tf += t.tf;
+        sum.tf2 += t.tf2;
     }
     const double n = static_cast<double>(opt.photons);
     SlabResult res;
@@ -137,10 +169,15 @@ SlabResult simulateSlab(const SlabOptions& opt, const std::function<void(uint64_
     res.Rsp = rsp;
     res.Rd = sum.r / n;
     res.Tt = sum.t / n;
-    res.Ta = 1.0 - rsp - res.Rd - res.Tt;  // unbiased, as roulette conserves energy in expectation
+    res.Ta = 1.0 - rsp - res.Rd - res.Tt - res.Rf - res.Tf;  // photons absorbed and not re-emitted (roulette is unbiased)
     res.Tballistic = sum.ballistic / n;
-    res.RdStderr = std::sqrt(std::max(0.0, sum.r2 / n - res.Rd * res.Rd) / (n - 1));
-    res.TtStderr = std::sqrt(std::max(0.0, sum.t2 / n - res.Tt * res.Tt) / (n - 1));
+    auto stderrOf = [n](double s1, double s2) { return std::sqrt(std::max(0.0, s2 / n - (s1 / n) * (s1 / n)) / (n - 1)); };
+    res.RdStderr = stderrOf(sum.r, sum.r2);
+    res.TtStderr = stderrOf(sum.t, sum.t2);
+    res.Rf = sum.rf / n;
+    res.Tf = sum.tf / n;
+    res.RfStderr = stderrOf(sum.rf, sum.rf2);
+    res.TfStderr = stderrOf(sum.tf, sum.tf2);
     res.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return res;
 }

@@ -54,14 +54,18 @@ TEST_P(SlabReference, MatchesWithinFourStandardErrors) {
     // The acceptance criterion asks for standard errors of at most 0.001.
     EXPECT_LE(r.RdStderr, 0.001);
     EXPECT_LE(r.TtStderr, 0.001);
-    if (c.Rd) EXPECT_NEAR(r.Rd, *c.Rd, 4 * r.RdStderr + c.referenceAccuracy) << "Rd stderr " << r.RdStderr;
-    if (c.Tt) EXPECT_NEAR(r.Tt, *c.Tt, 4 * r.TtStderr + c.referenceAccuracy) << "Tt stderr " << r.TtStderr;
+    if (c.Rd) {
+        EXPECT_NEAR(r.Rd, *c.Rd, 4 * r.RdStderr + c.referenceAccuracy) << "Rd stderr " << r.RdStderr;
+    }
+    if (c.Tt) {
+        EXPECT_NEAR(r.Tt, *c.Tt, 4 * r.TtStderr + c.referenceAccuracy) << "Tt stderr " << r.TtStderr;
+    }
     const double rsp = std::pow((c.options.nAbove - c.options.n) / (c.options.nAbove + c.options.n), 2);
     EXPECT_DOUBLE_EQ(r.Rsp, rsp);
 }
 
 INSTANTIATE_TEST_SUITE_P(Published, SlabReference, ::testing::ValuesIn(loadCases()),
-                         [](const ::testing::TestParamInfo<SlabCase>& info) { return info.param.name; });
+                         [](const ::testing::TestParamInfo<SlabCase>& param) { return param.param.name; });
 
 TEST(Slab, NonAbsorbingConservesEnergyExactly) {
     // With no absorption every photon leaves with weight 1 - Rsp: Rd + Tt + Rsp = 1 to rounding.
