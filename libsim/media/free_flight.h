@@ -5,6 +5,7 @@
 #include <cmath>
 #include <optional>
 
+#include "core/exponential.h"
 #include "core/rng.h"
 #include "spectral/sampled_spectrum.h"
 
@@ -57,7 +58,7 @@ S sampleTmaj(Iter iter, Rng& rng, Callback&& callback) {
         }
         double tMin = seg->tMin;
         while (true) {
-            const double t = tMin + sampleExponential(rng.uniform(), sigmaHero);
+            const double t = tMin + sampleStandardExponential(rng) / sigmaHero;
             if (t < seg->tMax) {
                 Tmaj *= expNeg(seg->sigmaMaj * (t - tMin));
                 if (!callback(t, seg->sigmaMaj, Tmaj)) return S(1.0);

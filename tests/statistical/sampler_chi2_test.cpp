@@ -13,6 +13,7 @@
 
 #include "core/math.h"
 #include "core/rng.h"
+#include "core/exponential.h"
 #include "core/sampling.h"
 #include "materials/fresnel.h"
 #include "materials/material.h"
@@ -225,6 +226,28 @@ TEST(Chi2Sampling, CosUniformAzimuth) {
     logResult("cos of uniform azimuth", r.summary());
     EXPECT_EQ(outside, 0);
     EXPECT_TRUE(r.accept(chi2::kFamilyAlpha)) << r.summary();
+}
+
+// Standard exponential by the ziggurat: bins over [0, 12) (past the tail start r = 7.7, so strip,
+// wedge and tail paths are all exercised) plus the tail beyond 12, against the CDF 1 - exp(-x).
+TEST(Chi2Sampling, ZigguratExponential) {
+    std::vector<double> edges = chi2::uniformEdges(0, 12, 96);
+    edges.push_back(1e300);
+    std::vector<double> obs(edges.size() - 1, 0.0);
+    Rng rng(15, 4);
+    const int n = 4'000'000;
+    double sum = 0;
+    for (int i = 0; i < n; ++i) {
+        const double x = sampleStandardExponential(rng);
+        ASSERT_GE(x, 0.0);
+        sum += x;
+        obs[static_cast<size_t>(chi2::binIndex(edges, x))] += 1;
+    }
+    const auto expected = chi2::expectedFromCdf(edges, [](double x) { return x > 1e299 ? 1.0 : -std::expm1(-x); }, n);
+    const auto r = chi2::chiSquare(obs, expected);
+    logResult("ziggurat exponential", r.summary());
+    EXPECT_TRUE(r.accept(chi2::kFamilyAlpha)) << r.summary();
+    EXPECT_NEAR(sum / n, 1.0, 4.0 / std::sqrt(n));  // mean 1, standard deviation 1
 }
 
 // Discrete sampling: index i with probability w_i / sum (zero weights never), the reported pmf, and

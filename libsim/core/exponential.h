@@ -1,0 +1,35 @@
+#pragma once
+// Standard exponential variates by the ziggurat method (Marsaglia & Tsang 2000, 256 strips), with
+// the strip index and the uniform taken from disjoint bits of one 64-bit draw (Doornik 2005). Exact:
+// 98.9% of draws cost one table lookup and a comparison; the rest fall back to an exact wedge test or
+// to the memoryless tail beyond r. Tested by chi-square in tests/statistical.
+#include <array>
+#include <cmath>
+#include <cstdint>
+
+namespace fluorosim {
+
+struct ExponentialZiggurat {
+    static constexpr double kR = 7.69711747013104972;     // start of the tail
+    static constexpr double kV = 3.949659822581572e-3;    // area of every strip
+    std::array<double, 257> x;  // strip widths, decreasing; x[0] is the base strip's virtual width
+    std::array<double, 257> f;  // exp(-x)
+    ExponentialZiggurat();
+};
+
+extern const ExponentialZiggurat kExponentialZiggurat;
+
+template <class Generator>
+double sampleStandardExponential(Generator& rng) {
+    const ExponentialZiggurat& z = kExponentialZiggurat;
+    while (true) {
+        const uint64_t bits = rng.next64();
+        const unsigned i = static_cast<unsigned>(bits & 0xffu);
+        const double x = static_cast<double>(bits >> 11) * (1.0 / 9007199254740992.0) * z.x[i];
+        if (x < z.x[i + 1]) return x;
+        if (i == 0) return ExponentialZiggurat::kR - std::log(1.0 - rng.uniform());
+        if (z.f[i] + rng.uniform() * (z.f[i + 1] - z.f[i]) < std::exp(-x)) return x;
+    }
+}
+
+}  // namespace fluorosim
