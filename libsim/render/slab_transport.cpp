@@ -169,7 +169,6 @@ SlabResult simulateSlab(const SlabOptions& opt, const std::function<void(uint64_
     res.Rsp = rsp;
     res.Rd = sum.r / n;
     res.Tt = sum.t / n;
-    res.Ta = 1.0 - rsp - res.Rd - res.Tt - res.Rf - res.Tf;  // photons absorbed and not re-emitted (roulette is unbiased)
     res.Tballistic = sum.ballistic / n;
     auto stderrOf = [n](double s1, double s2) { return std::sqrt(std::max(0.0, s2 / n - (s1 / n) * (s1 / n)) / (n - 1)); };
     res.RdStderr = stderrOf(sum.r, sum.r2);
@@ -178,6 +177,7 @@ SlabResult simulateSlab(const SlabOptions& opt, const std::function<void(uint64_
     res.Tf = sum.tf / n;
     res.RfStderr = stderrOf(sum.rf, sum.rf2);
     res.TfStderr = stderrOf(sum.tf, sum.tf2);
+    res.Ta = 1.0 - rsp - res.Rd - res.Tt - res.Rf - res.Tf;  // photons absorbed and not re-emitted (roulette is unbiased)
     res.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return res;
 }
