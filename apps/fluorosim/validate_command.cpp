@@ -72,12 +72,12 @@ void runSlab(const SlabArgs& a) {
     if (bar) bar->finish();
     std::printf(
         "{\"Rd\": %.8f, \"Tt\": %.8f, \"Rd_stderr\": %.8f, \"Tt_stderr\": %.8f, \"Rsp\": %.8f, \"Ta\": %.8f, "
-        "\"Tt_ballistic\": %.8f, \"Rf\": %.8f, \"Tf\": %.8f, \"Rf_stderr\": %.8f, \"Tf_stderr\": %.8f, "
+        "\"Tt_ballistic\": %.8f, \"Rf\": %.8f, \"Tf\": %.8f, \"Rf_stderr\": %.8f, \"Tf_stderr\": %.8f, \"guided\": %.8f, "
         "\"photons\": %llu, \"seconds\": %.4f, \"photons_per_second\": %.1f, "
         "\"input\": {\"mua_per_cm\": %.8g, \"mus_per_cm\": %.8g, \"g\": %.8g, \"mua_dye_per_cm\": %.8g, \"quantum_yield\": %.8g, "
         "\"emission_band\": {\"mua_per_cm\": %.8g, \"mus_per_cm\": %.8g, \"g\": %.8g, \"mua_dye_per_cm\": %.8g}, "
         "\"thickness_cm\": %.8g, \"n\": %.8g, \"n_above\": %.8g, \"n_below\": %.8g, \"seed\": %llu}}\n",
-        r.Rd, r.Tt, r.RdStderr, r.TtStderr, r.Rsp, r.Ta, r.Tballistic, r.Rf, r.Tf, r.RfStderr, r.TfStderr,
+        r.Rd, r.Tt, r.RdStderr, r.TtStderr, r.Rsp, r.Ta, r.Tballistic, r.Rf, r.Tf, r.RfStderr, r.TfStderr, r.guided,
         static_cast<unsigned long long>(r.photons), r.seconds, static_cast<double>(r.photons) / std::max(r.seconds, 1e-9), o.mua * 10,
         o.mus * 10, o.g, o.muaDye * 10, o.quantumYield, o.emissionBand().mua * 10, o.emissionBand().mus * 10, o.emissionBand().g,
         o.emissionBand().muaDye * 10, o.thickness / 10, o.n, o.nAbove, o.nBelow, static_cast<unsigned long long>(o.seed));

@@ -10,6 +10,9 @@ ExponentialZiggurat::ExponentialZiggurat() {
     for (int i = 0; i <= 256; ++i) f[i] = std::exp(-x[i]);
 }
 
-const ExponentialZiggurat kExponentialZiggurat;
+const ExponentialZiggurat& exponentialZiggurat() {
+    static const ExponentialZiggurat tables;
+    return tables;
+}
 
 }  // namespace fluorosim

@@ -27,14 +27,16 @@ std::array<double, 2> sampleUniformTriangle(double u1, double u2);
 
 // cos(phi) for phi uniform in [0, 2 pi), without trigonometry (von Neumann 1951): for (x, y)
 // uniform in the unit disk, (x^2 - y^2) / (x^2 + y^2) = cos(2 atan2(y, x)). Each candidate point takes
-// two 32-bit halves of one 64-bit draw (2^-32 resolution is far below any tally's noise).
+// two disjoint 26-bit fields from the high bits of one 64-bit draw (the lowest bits of xoshiro256+ are
+// weak); 2^-26 resolution is far below any tally's noise.
 template <class Generator>
 double sampleCosUniformAzimuth(Generator& rng) {
-    constexpr double kScale = 1.0 / 2147483648.0;  // maps [0, 2^32) to [0, 2)
+    constexpr double kScale = 1.0 / 33554432.0;  // maps [0, 2^26) to [0, 2)
+    constexpr uint64_t kMask = (uint64_t(1) << 26) - 1;
     while (true) {
         const uint64_t bits = rng.next64();
-        const double x = static_cast<double>(bits >> 32) * kScale - 1.0;
-        const double y = static_cast<double>(bits & 0xffffffffu) * kScale - 1.0;
+        const double x = static_cast<double>(bits >> 38) * kScale - 1.0;
+        const double y = static_cast<double>((bits >> 12) & kMask) * kScale - 1.0;
         const double r2 = x * x + y * y;
         if (r2 <= 1.0 && r2 > 0.0) return (x * x - y * y) / r2;
     }

@@ -26,7 +26,9 @@ struct DoubleRayContext {
 
 void sphereBounds(const RTCBoundsFunctionArguments* args) {
     const auto* s = static_cast<const Sphere*>(args->geometryUserPtr);
-    const float pad = static_cast<float>(s->radius * 1e-6 + 1e-9);
+    // Generous against float rounding of the centre and radius.
+    const double extent = std::max({std::abs(s->center.x), std::abs(s->center.y), std::abs(s->center.z)}) + s->radius;
+    const float pad = static_cast<float>(extent * 1e-6 + 1e-9);
     args->bounds_o->lower_x = static_cast<float>(s->center.x - s->radius) - pad;
     args->bounds_o->lower_y = static_cast<float>(s->center.y - s->radius) - pad;
     args->bounds_o->lower_z = static_cast<float>(s->center.z - s->radius) - pad;
@@ -182,6 +184,10 @@ void Geometry::commit() {
 }
 
 std::optional<SurfaceHit> Geometry::intersect(const Ray& ray, double tMin, double tMax) const {
+    return intersectImpl(ray, tMin, tMax, true);
+}
+
+std::optional<SurfaceHit> Geometry::intersectImpl(const Ray& ray, double tMin, double tMax, bool retry) const {
     DoubleRayContext ctx;
     rtcInitIntersectContext(&ctx.base);
     ctx.ray = &ray;
@@ -215,6 +221,7 @@ std::optional<SurfaceHit> Geometry::intersect(const Ray& ray, double tMin, doubl
         hit.n = normalize(hit.p - s->center);
         // Project onto the sphere so spawned rays start from the exact surface.
         hit.p = s->center + hit.n * s->radius;
+        hit.epsilon = sphereRayEpsilon(hit.p);
     } else {
         const TriangleMesh& m = impl_->meshes[hit.shape];
         const Vec3 &a = m.positions[m.indices[3 * hit.prim]], &b = m.positions[m.indices[3 * hit.prim + 1]],
@@ -227,11 +234,16 @@ std::optional<SurfaceHit> Geometry::intersect(const Ray& ray, double tMin, doubl
         if (!(hit.t > 0) || !std::isfinite(hit.t)) hit.t = rh.ray.tfar;
         const double u = rh.hit.u, v = rh.hit.v;
         hit.p = a * (1 - u - v) + b * u + c * v;
+        hit.epsilon = rayEpsilon(hit.p);
     }
-    if (!(hit.t > tMin) || !(hit.t < tMax)) {
-        if (hit.t <= tMin) hit.t = std::nextafter(tMin, 1e300);
-        if (hit.t >= tMax) return std::nullopt;
+    if (!(hit.t > tMin)) {
+        // Float traversal accepted a hit that double precision puts at or before tMin: a self-hit.
+        // Look once more, just past it.
+        const double skip = std::max(static_cast<double>(rh.ray.tfar), tMin) * (1.0 + 1e-6) + 1e-12;
+        if (!retry || skip >= tMax) return std::nullopt;
+        return intersectImpl(ray, skip, tMax, false);
     }
+    if (!(hit.t < tMax)) return std::nullopt;
     return hit;
 }
 
@@ -249,6 +261,11 @@ double Geometry::extent() const {
 double rayEpsilon(const Vec3& p) {
     const double m = std::max({std::abs(p.x), std::abs(p.y), std::abs(p.z), 1.0});
     return 2e-5 * m;
+}
+
+double sphereRayEpsilon(const Vec3& p) {
+    const double m = std::max({std::abs(p.x), std::abs(p.y), std::abs(p.z), 1.0});
+    return 1e-9 * m;
 }
 
 }  // namespace fluorosim

@@ -21,6 +21,7 @@ struct SurfaceHit {
     Vec3 n;            // unit geometric normal, pointing outward (sphere) or by winding (mesh)
     uint32_t shape = 0;
     uint32_t prim = 0;
+    double epsilon = 0;  // safe distance for spawning rays off this hit (see rayEpsilon)
 };
 
 class Geometry {
@@ -48,12 +49,16 @@ public:
     double extent() const;
 
 private:
+    std::optional<SurfaceHit> intersectImpl(const Ray& ray, double tMin, double tMax, bool retry) const;
     struct Impl;
     std::unique_ptr<Impl> impl_;
 };
 
-// Offset for spawning rays off a surface at p without self-intersection (float-precision Embree).
+// Offset for spawning rays off a triangle at p without self-intersection (float-precision Embree).
+// Spheres are intersected in double precision and use a much smaller, scale-relative offset, so that
+// sub-micrometre beads far from the origin are still crossed correctly.
 double rayEpsilon(const Vec3& p);
+double sphereRayEpsilon(const Vec3& p);
 
 // Loads OBJ or PLY triangles through Assimp. Throws IoError/ConfigError naming the file.
 TriangleMesh loadMesh(const std::string& file);

@@ -26,6 +26,7 @@ double fresnelDielectric(double cosThetaI, double eta) {
 
 double fresnelConductor(double cosThetaI, std::complex<double> eta) {
     using C = std::complex<double>;
+    if (std::norm(eta) == 0.0) return 1.0;  // a vanishing index reflects everything (and 0/0 would be NaN)
     cosThetaI = std::clamp(cosThetaI, 0.0, 1.0);
     const double sin2ThetaI = 1.0 - cosThetaI * cosThetaI;
     const C sin2ThetaT = sin2ThetaI / (eta * eta);

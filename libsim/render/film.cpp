@@ -45,7 +45,8 @@ void Film::addSample(int x, int y, const SampledSpectrum& L, const SampledWavele
         xyz_[3 * pixel + 0] += c * cmf_.x(l) / yIntegral_;
         xyz_[3 * pixel + 1] += c * cmf_.y(l) / yIntegral_;
         xyz_[3 * pixel + 2] += c * cmf_.z(l) / yIntegral_;
-        const int b = static_cast<int>(std::floor((l - lambdaMin_) / binWidth_));
+        // A line exactly at the range maximum belongs to the last bin.
+        const int b = std::min(bins - 1, static_cast<int>(std::floor((l - lambdaMin_) / binWidth_)));
         if (b >= 0 && b < bins) spectral_[pixel * static_cast<size_t>(bins) + static_cast<size_t>(b)] += c / binWidths_[static_cast<size_t>(b)];
     }
 }

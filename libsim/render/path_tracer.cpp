@@ -10,8 +10,7 @@
 namespace fluorosim {
 namespace {
 
-Vec3 offsetAlong(const Vec3& p, const Vec3& n, const Vec3& dir) {
-    const double eps = rayEpsilon(p);
+Vec3 offsetAlong(const Vec3& p, const Vec3& n, const Vec3& dir, double eps) {
     return p + n * (dot(n, dir) > 0 ? eps : -eps);
 }
 
@@ -29,19 +28,21 @@ int PathTracer::mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const
 }
 
 SampledSpectrum PathTracer::transmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl,
-                                         const Vec3* surfaceNormal) const {
+                                         const Vec3* surfaceNormal, double surfaceEpsilon) const {
     SampledSpectrum T(1.0);
     // Rays start exactly on surfaces and skip self-intersections with tMin, so every segment lies on
     // the line from p0 to p1 and its length is exact.
     Vec3 origin = p0;
     const Vec3* normal = surfaceNormal;
+    double epsilon = surfaceEpsilon;
     Vec3 lastNormal;
-    for (int crossings = 0; crossings < 1024; ++crossings) {
+    // Every crossing advances along the segment; the cap only guards against numerical stalls.
+    for (int crossings = 0; crossings < 1000000; ++crossings) {
         const Vec3 d = p1 - origin;
         const double dist = length(d);
         if (!(dist > 0)) return T;
         const Ray r{origin, d / dist};
-        const double tMin = normal ? rayEpsilon(origin) / std::max(std::abs(dot(*normal, r.d)), 1e-2) : 0.0;
+        const double tMin = normal ? epsilon / std::max(std::abs(dot(*normal, r.d)), 1e-2) : 0.0;
         const double tMax = dist - rayEpsilon(p1);
         const auto hit = tMax > tMin ? scene_.geometry.intersect(r, tMin, tMax) : std::nullopt;
         const double segment = hit ? hit->t : dist;
@@ -57,6 +58,7 @@ SampledSpectrum PathTracer::transmittance(const Vec3& p0, const Vec3& p1, int me
         origin = r.at(hit->t);
         lastNormal = hit->n;
         normal = &lastNormal;
+        epsilon = hit->epsilon;
     }
     return SampledSpectrum(0.0);
 }
@@ -72,7 +74,7 @@ SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengt
     // NEE from a scattering vertex. evalScatter(wi) returns {f * |cos| (or phase value), pdf}.
     // At a surface, `surface` and `n` let the light ray leave through the side of wi (transmission).
     auto directLight = [&](const Vec3& p, int lightMedium, const SampledSpectrum& r_p, auto&& evalScatter,
-                           const Vec3& nOffset, const ShapeInfo* surface) -> SampledSpectrum {
+                           const Vec3& nOffset, const ShapeInfo* surface, double surfaceEps) -> SampledSpectrum {
         const double uLight = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform();
         const auto ls = lights_.sample(p, uLight, u1, u2, wl);
         if (!ls || !ls->L || !(ls->pdf > 0)) return SampledSpectrum(0.0);
@@ -80,7 +82,7 @@ SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengt
         if (!fHat) return SampledSpectrum(0.0);
         int startMedium = lightMedium;
         if (surface) startMedium = mediumAfterCrossing(*surface, nOffset, ls->wi, lightMedium);
-        const SampledSpectrum T = transmittance(p, ls->p, startMedium, wl, surface ? &nOffset : nullptr);
+        const SampledSpectrum T = transmittance(p, ls->p, startMedium, wl, surface ? &nOffset : nullptr, surfaceEps);
         if (!T) return SampledSpectrum(0.0);
         const SampledSpectrum rl = r_p * ls->pdf;
         if (ls->delta) return beta * fHat * T * ls->L / rl.average();
@@ -111,7 +113,7 @@ SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengt
                         beta *= Tm * mp.sigmaS / pdf;
                         r_u *= Tm * mp.sigmaS / pdf;
                         ++stats.scatteringEvents;
-                        if (++depth >= scene_.render.maxDepth) {
+                        if (depth++ >= scene_.render.maxDepth) {
                             ++stats.truncated;
                             terminated = true;
                             return false;
@@ -126,7 +128,7 @@ SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengt
                                     const double v = phase.pdf(dirIn, wi);
                                     return std::pair{SampledSpectrum(v), v};
                                 },
-                                Vec3(), nullptr);
+                                Vec3(), nullptr, 0.0);
                             double phasePdf = 0;
                             const Vec3 wi = phase.sample(dirIn, rng.uniform(), rng.uniform(), &phasePdf);
                             // HG is sampled exactly, so f / pdf = 1 and beta is unchanged.
@@ -180,10 +182,10 @@ SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengt
         if (shape.material == kNone) {
             if (!shape.isInterface) break;  // black emitter or absorber
             medium = mediumAfterCrossing(shape, hit->n, ray.d, medium);
-            ray.o = offsetAlong(hit->p, hit->n, ray.d);
+            ray.o = offsetAlong(hit->p, hit->n, ray.d, hit->epsilon);
             continue;
         }
-        if (++depth >= scene_.render.maxDepth) {
+        if (depth++ >= scene_.render.maxDepth) {
             ++stats.truncated;
             break;
         }
@@ -204,7 +206,7 @@ SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengt
                     const SampledSpectrum f = mat.f(wo, wiLocal, wl, eta, TransportMode::Radiance) * std::abs(wiLocal.z);
                     return std::pair{f, mat.pdf(wo, wiLocal, eta)};
                 },
-                n, &shape);
+                n, &shape, hit->epsilon);
         }
 
         const auto bs = mat.sample(wo, rng.uniform(), rng.uniform(), rng.uniform(), wl, eta, TransportMode::Radiance);
@@ -216,7 +218,7 @@ SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengt
         if (bs->transmission) etaScale *= sqr(bs->etap);
         prevScatter = hit->p;
         medium = mediumAfterCrossing(shape, hit->n, wi, medium);
-        ray = Ray{offsetAlong(hit->p, n, wi), wi};
+        ray = Ray{offsetAlong(hit->p, n, wi, hit->epsilon), wi};
         if (!beta) break;
 
         const SampledSpectrum rrBeta = beta * etaScale / r_u.average();

@@ -33,7 +33,7 @@ public:
     // Transmittance from p0 to p1 through null interfaces and media; zero if a surface blocks.
     // When p0 lies on a surface, pass its normal so the ray leaves it without self-intersection.
     SampledSpectrum transmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl,
-                                  const Vec3* surfaceNormal = nullptr) const;
+                                  const Vec3* surfaceNormal = nullptr, double surfaceEpsilon = 0.0) const;
 
 private:
     int mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const Vec3& dir, int current) const;

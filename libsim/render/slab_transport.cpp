@@ -28,6 +28,7 @@ constexpr double kSurvival = 0.1;
 struct Tally {
     double r = 0, r2 = 0, t = 0, t2 = 0, ballistic = 0;
     double rf = 0, rf2 = 0, tf = 0, tf2 = 0;
+    double guided = 0;  // weight trapped by total internal reflection in a band without interactions
 };
 
 // Per-band constants of the collision step.
@@ -131,6 +132,11 @@ SlabResult simulateSlab(const SlabOptions& opt, const std::function<void(uint64_
                 z = uz > 0 ? d : 0.0;  // exactly on the boundary
                 const double nOut = uz > 0 ? opt.nBelow : opt.nAbove;
                 const double reflectance = fresnelDielectric(std::abs(uz), nOut / opt.n);
+                if (reflectance >= 1.0 && b.mut == 0) {
+                    // Nothing can change this photon's direction: it is guided to the slab's infinite edge.
+                    tally.guided += w;
+                    break;
+                }
                 if (reflectance > 0 && (reflectance >= 1.0 || rng.uniform() < reflectance)) {
                     uz = -uz;
                     continue;
@@ -162,6 +168,7 @@ SlabResult simulateSlab(const SlabOptions& opt, const std::function<void(uint64_
         sum.rf2 += t.rf2;
         sum.tf += t.tf;
         sum.tf2 += t.tf2;
+        sum.guided += t.guided;
     }
     const double n = static_cast<double>(opt.photons);
     SlabResult res;
@@ -173,11 +180,12 @@ SlabResult simulateSlab(const SlabOptions& opt, const std::function<void(uint64_
     auto stderrOf = [n](double s1, double s2) { return std::sqrt(std::max(0.0, s2 / n - (s1 / n) * (s1 / n)) / (n - 1)); };
     res.RdStderr = stderrOf(sum.r, sum.r2);
     res.TtStderr = stderrOf(sum.t, sum.t2);
+    res.guided = sum.guided / n;
     res.Rf = sum.rf / n;
     res.Tf = sum.tf / n;
     res.RfStderr = stderrOf(sum.rf, sum.rf2);
     res.TfStderr = stderrOf(sum.tf, sum.tf2);
-    res.Ta = 1.0 - rsp - res.Rd - res.Tt - res.Rf - res.Tf;  // photons absorbed and not re-emitted (roulette is unbiased)
+    res.Ta = 1.0 - rsp - res.Rd - res.Tt - res.Rf - res.Tf - res.guided;  // photons absorbed and not re-emitted (roulette is unbiased)
     res.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return res;
 }

@@ -44,6 +44,7 @@ struct SlabResult {
     double Rsp = 0;                        // specular reflectance at the first surface
     double Tballistic = 0;                 // part of Tt that never scattered
     double Rf = 0, Tf = 0, RfStderr = 0, TfStderr = 0;  // escaping fluorescence, photons per incident photon
+    double guided = 0;  // trapped by total internal reflection in a band where nothing interacts (leaves at the edge)
     uint64_t photons = 0;
     double seconds = 0;
 };

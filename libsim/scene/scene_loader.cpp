@@ -158,6 +158,7 @@ public:
         if (r.has("lights")) loadLights(r.at("lights"), scene);
         if (scene.lights.empty()) r.fail("the scene has no light (add an \"emission\" to a shape or a \"lights\" entry)");
         loadCamera(r.at("camera"), scene);
+        scene.warnings.insert(scene.warnings.end(), warnings_.begin(), warnings_.end());
         scene.finalize();
         return scene;
     }
@@ -269,6 +270,14 @@ private:
     }
 
     Spectrum checked(const Node& n, Spectrum s, SpectrumKind kind) {
+        if (const auto range = s.tableRange(); range && (range->first > lambdaMin() || range->second < lambdaMax())) {
+            const std::string what = "tabulated from " + fmtNm(range->first) + " to " + fmtNm(range->second) + " nm, inside the spectral range " +
+                                     fmtNm(lambdaMin()) + "-" + fmtNm(lambdaMax()) + " nm";
+            // A zero refractive index is meaningless; elsewhere zero outside the table is a legal (if
+            // surprising) value, so the user is told rather than stopped.
+            if (kind == SpectrumKind::Unitless) n.fail(what + "; a refractive index must cover the whole range");
+            warnings_.push_back(file_.string() + ": " + n.path() + ": " + what + "; it is 0 outside its table");
+        }
         const double maxV = s.maxValue();
         if (!std::isfinite(maxV) || maxV < 0)
             n.fail("spectrum values must be finite and non-negative");
@@ -276,6 +285,11 @@ private:
         return s;
     }
 
+    static std::string fmtNm(double v) {
+        std::ostringstream os;
+        os << v;
+        return os.str();
+    }
     double lambdaMin() const { return lambdaMin_; }
     double lambdaMax() const { return lambdaMax_; }
 
@@ -517,6 +531,7 @@ private:
     const DyeResolver& dyes_;
     std::map<std::string, int> mediumIndex_, materialIndex_;
     std::set<std::string> dielectrics_;
+    std::vector<std::string> warnings_;
     double lambdaMin_ = 300, lambdaMax_ = 800;
 };
 

@@ -2,6 +2,7 @@
 // A spectrum: a constant or a tabulated function, plus optional spectral lines (Dirac deltas with a
 // given integrated power). Lines only make sense for emission; coefficients and reflectances reject them.
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include "spectral/sampled_wavelengths.h"
@@ -31,6 +32,11 @@ public:
     const std::vector<SpectralLine>& spectralLines() const { return lines_; }
     bool hasContinuousPart() const { return constant_ != 0.0 || table_.has_value(); }
     bool isConstant() const { return !table_ && lines_.empty(); }
+    // Wavelength range of the tabulated part, if any (outside it the spectrum is 0).
+    std::optional<std::pair<double, double>> tableRange() const {
+        if (!table_) return std::nullopt;
+        return std::pair{table_->minLambda(), table_->maxLambda()};
+    }
     double maxValue() const;
     // Total power over [a, b]: continuous integral plus lines inside the range.
     double integral(double a, double b) const;

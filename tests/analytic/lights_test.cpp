@@ -64,6 +64,14 @@ TEST(Lights, PointLightLineOnLambertianPlane) {
     EXPECT_NEAR(binValue(scene, kLine, 64), expected, 1e-6 * expected);
 }
 
+TEST(Lights, MaxDepthOneStillGivesDirectLighting) {
+    // max_depth counts scattering vertices: 1 allows the plane's vertex and its next-event estimate.
+    Scene scene = planeScene(PointLight{Vec3(0, kHeight, 0), Spectrum::lines({{kLine, kPower}})});
+    scene.render.maxDepth = 1;
+    const double expected = kRho * kPower / (kPi * kHeightM2);
+    EXPECT_NEAR(binValue(scene, kLine, 16), expected, 1e-6 * expected);
+}
+
 TEST(Lights, SpotLightFalloffAndCone) {
     // Light at (x0, h, 0) aimed at (x0, 0, 0); the origin lies at angle atan(x0 / h) off axis.
     const double x0 = 1.0, angle = std::atan(x0 / kHeight) * 180 / kPi;  // 26.6 deg

@@ -506,3 +506,26 @@ TEST(SceneLoaderDyes, BadDyeInput) {
 
 }  // namespace
 }  // namespace fluorosim
+
+namespace fluorosim {
+namespace {
+
+TEST(SceneLoaderCoverage, ConductorIndexMustCoverTheRange) {
+    json j = minimalScene();
+    j["materials"]["metal"] = {{"type", "conductor"},
+                               {"eta", {{"tabulated", {{"wavelength_nm", {450, 650}}, {"values", {1.2, 1.1}}}}}},
+                               {"k", 3.0}};
+    expectRejected(j, {"/materials/metal/eta", "must cover the whole range"});
+}
+
+TEST(SceneLoaderCoverage, PartialTablesWarn) {
+    json j = minimalScene();
+    j["materials"]["white"]["reflectance"] = {{"tabulated", {{"wavelength_nm", {450, 650}}, {"values", {0.5, 0.5}}}}};
+    const Scene scene = load(j);
+    ASSERT_FALSE(scene.warnings.empty());
+    EXPECT_TRUE(contains(scene.warnings[0], "/materials/white/reflectance")) << scene.warnings[0];
+    EXPECT_TRUE(contains(scene.warnings[0], "0 outside its table")) << scene.warnings[0];
+}
+
+}  // namespace
+}  // namespace fluorosim
