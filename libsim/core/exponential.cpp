@@ -10,9 +10,4 @@ ExponentialZiggurat::ExponentialZiggurat() {
     for (int i = 0; i <= 256; ++i) f[i] = std::exp(-x[i]);
 }
 
-const ExponentialZiggurat& exponentialZiggurat() {
-    static const ExponentialZiggurat tables;
-    return tables;
-}
-
 }  // namespace fluorosim

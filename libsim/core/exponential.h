@@ -17,8 +17,12 @@ struct ExponentialZiggurat {
     ExponentialZiggurat();
 };
 
-// Built on first use, so no static initializer elsewhere can see an empty table.
-const ExponentialZiggurat& exponentialZiggurat();
+// Built on first use, so no static initializer elsewhere can see an empty table; inline so that the
+// sampler's fast path stays in the caller.
+inline const ExponentialZiggurat& exponentialZiggurat() {
+    static const ExponentialZiggurat tables;
+    return tables;
+}
 
 template <class Generator>
 double sampleStandardExponential(Generator& rng) {
