@@ -89,7 +89,8 @@ void runRender(const RenderArgs& a) {
     opt.validate();
     opt.threads = a.threads;
     opt.seed = scene.render.seed;
-    opt.sppPerPass = std::max(1, opt.spp / 64);
+    // One sample per pixel per pass: Ctrl-C then waits at most one pass, and checkpoints stay fresh.
+    opt.sppPerPass = 1;
     opt.cancel = &gCancel;
     Film film(scene.camera.width, scene.camera.height, scene.spectral.lambdaMin, scene.spectral.lambdaMax, scene.spectral.binWidth, db.cie1931());
     ProgressBar bar("render");
