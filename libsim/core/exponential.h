@@ -17,25 +17,33 @@ struct ExponentialZiggurat {
     ExponentialZiggurat();
 };
 
-// Built on first use, so no static initializer elsewhere can see an empty table; inline so that the
-// sampler's fast path stays in the caller.
-inline const ExponentialZiggurat& exponentialZiggurat() {
-    static const ExponentialZiggurat tables;
-    return tables;
+// Built before main() (no static initializer anywhere samples exponentials); an inline variable,
+// so the sampler's fast path reads it without a guard.
+inline const ExponentialZiggurat kExponentialZiggurat{};
+
+// Wedge test, tail and retry: the rare cases, kept out of line so the fast path inlines.
+template <class Generator>
+[[gnu::noinline]] double sampleStandardExponentialSlow(Generator& rng, unsigned i, double x) {
+    const ExponentialZiggurat& z = kExponentialZiggurat;
+    while (true) {
+        if (i == 0) return ExponentialZiggurat::kR - std::log(1.0 - rng.uniform());
+        if (z.f[i] + rng.uniform() * (z.f[i + 1] - z.f[i]) < std::exp(-x)) return x;
+        const uint64_t bits = rng.next64();
+        i = static_cast<unsigned>((bits >> 3) & 0xffu);
+        x = static_cast<double>(bits >> 11) * (1.0 / 9007199254740992.0) * z.x[i];
+        if (x < z.x[i + 1]) return x;
+    }
 }
 
 template <class Generator>
-double sampleStandardExponential(Generator& rng) {
-    const ExponentialZiggurat& z = exponentialZiggurat();
-    while (true) {
-        // Strip index from bits 3-10 (the lowest bits of xoshiro256+ are weak), uniform from bits 11-63.
-        const uint64_t bits = rng.next64();
-        const unsigned i = static_cast<unsigned>((bits >> 3) & 0xffu);
-        const double x = static_cast<double>(bits >> 11) * (1.0 / 9007199254740992.0) * z.x[i];
-        if (x < z.x[i + 1]) return x;
-        if (i == 0) return ExponentialZiggurat::kR - std::log(1.0 - rng.uniform());
-        if (z.f[i] + rng.uniform() * (z.f[i + 1] - z.f[i]) < std::exp(-x)) return x;
-    }
+inline double sampleStandardExponential(Generator& rng) {
+    // Strip index from bits 3-10 (the lowest bits of xoshiro256+ are weak), uniform from bits 11-63.
+    const ExponentialZiggurat& z = kExponentialZiggurat;
+    const uint64_t bits = rng.next64();
+    const unsigned i = static_cast<unsigned>((bits >> 3) & 0xffu);
+    const double x = static_cast<double>(bits >> 11) * (1.0 / 9007199254740992.0) * z.x[i];
+    if (x < z.x[i + 1]) [[likely]] return x;
+    return sampleStandardExponentialSlow(rng, i, x);
 }
 
 }  // namespace fluorosim

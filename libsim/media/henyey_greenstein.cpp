@@ -18,15 +18,6 @@ double HenyeyGreenstein::pdfCos(double c) const {
     return kInv4Pi * (1.0 - g_ * g_) / (denom * std::sqrt(denom));
 }
 
-double HenyeyGreenstein::sampleCos(double u) const {
-    // Below 1e-6 the closed form loses digits to cancellation; the isotropic limit differs from HG
-    // by O(g) in pdf, which is below any measurable level there.
-    if (std::abs(g_) < 1e-6) return 1.0 - 2.0 * u;
-    const double s = (1.0 - g_ * g_) / (1.0 - g_ + 2.0 * g_ * u);
-    const double c = (1.0 + g_ * g_ - s * s) / (2.0 * g_);
-    return std::clamp(c, -1.0, 1.0);
-}
-
 Vec3 HenyeyGreenstein::sample(const Vec3& dirIn, double u1, double u2, double* pdfOut) const {
     const double cosTheta = sampleCos(u1);
     const double sinTheta = safeSqrt(1.0 - cosTheta * cosTheta);
