@@ -18,6 +18,8 @@ cases = [
  ("tir_n15_g0", dict(mua=10,mus=90,g=0.0,d=0.02,n=1.5)),
  ("back_gm05", dict(mua=10,mus=90,g=-0.5,d=0.02)),
  ("tir_n14_g09_mixed", dict(mua=1,mus=100,g=0.9,d=0.1,n=1.4,na=1.0,nb=1.33)),
+ ("thick_conservative_g09_n15", dict(mua=0,mus=200,g=0.9,d=0.1,n=1.5)),
+ ("thick_backward_gm05_n133", dict(mua=0.1,mus=199.9,g=-0.5,d=0.1,n=1.33)),
 ]
 for name, kw in cases:
     res = []
