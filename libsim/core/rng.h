@@ -45,8 +45,6 @@ public:
     }
     // Uniform in [0, 1) from the top 53 bits (the low bits of xoshiro256+ are weaker).
     double uniform() { return static_cast<double>(next64() >> 11) * (1.0 / 9007199254740992.0); }
-    // Uniform in (0, 1]: safe for -log(u).
-    double uniformOpenZero() { return 1.0 - uniform(); }
 
 private:
     uint64_t s_[4];

@@ -24,16 +24,4 @@ SampledWavelengths SampledWavelengths::atLine(double lambdaNm, double mass) {
     return wl;
 }
 
-void SampledWavelengths::terminateSecondary() {
-    if (secondaryTerminated()) return;
-    for (int i = 1; i < kNumWavelengths; ++i) pdf[i] = 0;
-    pdf[0] /= kNumWavelengths;
-}
-
-bool SampledWavelengths::secondaryTerminated() const {
-    for (int i = 1; i < kNumWavelengths; ++i)
-        if (pdf[i] != 0) return false;
-    return true;
-}
-
 }  // namespace fluorosim

@@ -16,15 +16,6 @@ struct SampledWavelengths {
     static SampledWavelengths sampleUniform(double u, double lambdaMin, double lambdaMax, double weight = 1.0);
     // All four slots at one spectral line, sampled with probability mass `mass`.
     static SampledWavelengths atLine(double lambdaNm, double mass);
-
-    SampledSpectrum pdfSpectrum() const {
-        SampledSpectrum s;
-        for (int i = 0; i < kNumWavelengths; ++i) s[i] = pdf[i];
-        return s;
-    }
-    // Keep only the hero (e.g. after wavelength-dependent refraction); its pdf absorbs the 1/4 share.
-    void terminateSecondary();
-    bool secondaryTerminated() const;
 };
 
 }  // namespace fluorosim
