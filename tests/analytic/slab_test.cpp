@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <ostream>
 #include <nlohmann/json.hpp>
 
 #include "render/slab_transport.h"
@@ -43,6 +44,9 @@ std::vector<SlabCase> loadCases() {
     }
     return cases;
 }
+
+// Keeps test listings readable (gtest would otherwise print the struct's bytes).
+void PrintTo(const SlabCase& c, std::ostream* os) { *os << c.name; }
 
 class SlabReference : public ::testing::TestWithParam<SlabCase> {};
 
