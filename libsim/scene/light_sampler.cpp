@@ -12,6 +12,22 @@ namespace {
 // is converted from per mm^2 to per m^2.
 constexpr double kMm2PerM2 = 1e6;
 
+// Cone of directions subtended by a sphere seen from outside (pbrt-v4's Sphere::Sample).
+struct SphereCone {
+    double sin2ThetaMax, cosThetaMax, oneMinusCosThetaMax;
+    bool inside;  // the reference point is inside the sphere: sample by area instead
+    SphereCone(const Vec3& ref, const Vec3& center, double radius) {
+        const double dc2 = dot(ref - center, ref - center);
+        inside = dc2 <= radius * radius;
+        sin2ThetaMax = inside ? 1.0 : radius * radius / dc2;
+        cosThetaMax = safeSqrt(1.0 - sin2ThetaMax);
+        oneMinusCosThetaMax = 1.0 - cosThetaMax;
+        // For tiny cones 1 - cos loses digits; use its Taylor expansion.
+        if (sin2ThetaMax < 0.00068523) oneMinusCosThetaMax = sin2ThetaMax / 2;
+    }
+    double solidAnglePdf() const { return 1.0 / (2.0 * kPi * oneMinusCosThetaMax); }
+};
+
 double smoothStep(double x, double a, double b) {
     if (a == b) return x < a ? 0.0 : 1.0;
     const double t = std::clamp((x - a) / (b - a), 0.0, 1.0);
@@ -53,8 +69,33 @@ std::optional<LightSample> LightSampler::sample(const Vec3& ref, double uLight, 
     if (scene_.geometry.isSphere(al.shape)) {
         const Vec3 c = scene_.geometry.sphereCenter(al.shape);
         const double r = scene_.geometry.sphereRadius(al.shape);
-        ls.n = sampleUniformSphere(u1, u2);
-        ls.p = c + ls.n * r;
+        const SphereCone cone(ref, c, r);
+        if (cone.inside) {
+            ls.n = sampleUniformSphere(u1, u2);
+            ls.p = c + ls.n * r;
+        } else {
+            // Uniform direction in the cone, then the visible point of the sphere along it.
+            double cosTheta = 1.0 - u1 * cone.oneMinusCosThetaMax;
+            double sin2Theta = 1.0 - cosTheta * cosTheta;
+            if (cone.sin2ThetaMax < 0.00068523) {
+                sin2Theta = cone.sin2ThetaMax * u1;
+                cosTheta = std::sqrt(1.0 - sin2Theta);
+            }
+            const double sinThetaMax = std::sqrt(cone.sin2ThetaMax);
+            const double cosAlpha = sin2Theta / sinThetaMax + cosTheta * safeSqrt(1.0 - sin2Theta / cone.sin2ThetaMax);
+            const double sinAlpha = safeSqrt(1.0 - cosAlpha * cosAlpha);
+            const double phi = 2.0 * kPi * u2;
+            const Frame frame = Frame::fromNormal(normalize(c - ref));
+            ls.n = frame.toWorld(Vec3(-sinAlpha * std::cos(phi), -sinAlpha * std::sin(phi), -cosAlpha));
+            ls.p = c + ls.n * r;
+            const Vec3 d = ls.p - ref;
+            ls.distance = length(d);
+            if (!(ls.distance > 0)) return std::nullopt;
+            ls.wi = d / ls.distance;
+            ls.L = emitted(al, ls.n, -ls.wi, wl);
+            ls.pdf = selectPdf * cone.solidAnglePdf();
+            return ls;
+        }
     } else {
         const TriangleMesh& m = scene_.geometry.mesh(al.shape);
         const auto it = std::lower_bound(al.triangleCdf.begin(), al.triangleCdf.end(), u1);
@@ -79,6 +120,14 @@ std::optional<LightSample> LightSampler::sample(const Vec3& ref, double uLight, 
 }
 
 double LightSampler::pdf(const Vec3& ref, uint32_t shape, const Vec3& pLight, const Vec3& nLight) const {
+    if (scene_.geometry.isSphere(shape)) {
+        const SphereCone cone(ref, scene_.geometry.sphereCenter(shape), scene_.geometry.sphereRadius(shape));
+        if (!cone.inside) {
+            // Only the cap facing the reference point is ever sampled.
+            if (dot(nLight, ref - pLight) <= 0) return 0.0;
+            return cone.solidAnglePdf() / static_cast<double>(scene_.lights.size());
+        }
+    }
     const Vec3 d = pLight - ref;
     const double dist2 = dot(d, d);
     const double cosLight = std::abs(dot(nLight, d)) / std::sqrt(dist2);

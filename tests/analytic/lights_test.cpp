@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "core/math.h"
+#include "render/path_tracer.h"
 #include "render/renderer.h"
 #include "spectral/color.h"
 
@@ -62,6 +63,37 @@ TEST(Lights, PointLightLineOnLambertianPlane) {
     // Direct lighting only (one bounce back to the camera); indirect light escapes to infinity.
     const double expected = kRho * kPower / (kPi * kHeightM2);
     EXPECT_NEAR(binValue(scene, kLine, 64), expected, 1e-6 * expected);
+}
+
+TEST(Lights, SphereLightOverLambertianPlane) {
+    // A sphere of radiance L and radius r whose centre is D above the plane gives the irradiance
+    // E = pi L (r / D)^2 directly below it, so the plane's radiance is rho L (r / D)^2. NEE samples
+    // the visible cone; BSDF-sampled hits are weighted by MIS.
+    const double L = 3.0, r = 0.5, D = 2.0;
+    Scene scene;
+    scene.materials.push_back(makeDiffuse(Spectrum::constant(kRho)));
+    scene.geometry.addMesh(TriangleMesh{{Vec3(-50, 0, -50), Vec3(50, 0, -50), Vec3(50, 0, 50), Vec3(-50, 0, 50)}, {0, 1, 2, 0, 2, 3}});
+    ShapeInfo plane;
+    plane.material = 0;
+    scene.shapes.push_back(plane);
+    const uint32_t bulb = scene.geometry.addSphere(Vec3(0, D, 0), r);
+    scene.shapes.push_back(ShapeInfo{"bulb"});
+    scene.addAreaLight(bulb, AreaEmission{Spectrum::constant(L), false});
+    scene.finalize();
+    const PathTracer tracer(scene);
+    PathStats stats;
+    const int n = 100000;
+    double sum = 0, sum2 = 0;
+    for (int i = 0; i < n; ++i) {
+        Rng rng = Rng::forKey(8, static_cast<uint64_t>(i), 2);
+        const SampledWavelengths wl = SampledWavelengths::sampleUniform(rng.uniform(), 400, 700);
+        const double v = tracer.radiance(Ray{Vec3(0, 0.2, 0), Vec3(0, -1, 0)}, kNone, wl, rng, stats).average();
+        sum += v;
+        sum2 += v * v;
+    }
+    const double mean = sum / n, se = std::sqrt((sum2 / n - mean * mean) / (n - 1));
+    EXPECT_NEAR(mean, kRho * L * (r / D) * (r / D), 4 * se) << "stderr " << se;
+    EXPECT_LT(se, 0.01 * mean);
 }
 
 TEST(Lights, MaxDepthOneStillGivesDirectLighting) {
