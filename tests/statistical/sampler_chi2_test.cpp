@@ -528,10 +528,9 @@ TEST(Chi2LightSampler, DirectionsHaveReportedDensity) {
     grid.nPhi = 40;
 
     // Expected cell probabilities. A direction's density is the sum of LightSampler::pdf over every
-    // light point along it (uniform area sampling reaches the far side of the sphere too, so the map
-    // from sphere points to directions is 2 to 1). Near the sphere's silhouette that density has an
-    // integrable 1/cos singularity, so instead of integrating over directions, integrate the same
-    // measure on the light surfaces: P(cell) = sum over lights of the integral over the points x
+    // light point along it (for a sphere seen from outside, the pdf is zero on the far side, since only
+    // the visible cap is sampled). Integrating over the light surfaces avoids the silhouette, where
+    // the area-to-direction Jacobian is singular: P(cell) = sum over lights of the integral over the points x
     // whose direction lies in the cell of pdf(ref, x) * cos(x) / |x - ref|^2 dA(x).
     std::vector<double> prob(static_cast<size_t>(grid.cells()), 0.0);
     auto accumulate = [&](uint32_t shape, const Vec3& x, const Vec3& n, double dA) {
