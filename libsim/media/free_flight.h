@@ -16,10 +16,6 @@ inline double heroComponent(const SampledSpectrum& s) { return s[0]; }
 inline double expNeg(double x) { return std::exp(-x); }
 inline SampledSpectrum expNeg(const SampledSpectrum& x) { return exp(x * -1.0); }
 
-// Exponential distance with rate sigma; u in [0, 1). 1 - u is exact for u >= 1/2, and log is
-// cheaper than log1p; for small u the absolute error of log(1 - u) stays below 1e-16.
-inline double sampleExponential(double u, double sigma) { return -std::log(1.0 - u) / sigma; }
-
 // A ray interval [tMin, tMax) over which sigmaMaj bounds the extinction.
 template <class S>
 struct MajorantSegment {

@@ -71,6 +71,17 @@ SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengt
     Vec3 prevScatter = ray.o;
     ++stats.paths;
 
+    // Roulette on the MIS-weighted throughput; survivors are rescaled so max(rrBeta) <= 1 afterwards.
+    auto survivesRoulette = [&]() {
+        const SampledSpectrum rrBeta = beta * etaScale / r_u.average();
+        if (rrBeta.maxComponent() < 1 && depth > 1) {
+            const double q = std::max(0.0, 1.0 - rrBeta.maxComponent());
+            if (rng.uniform() < q) return false;
+            beta /= 1.0 - q;
+        }
+        return true;
+    };
+
     // NEE from a scattering vertex. evalScatter(wi) returns {f * |cos| (or phase value), pdf}.
     // At a surface, `surface` and `n` let the light ray leave through the side of wi (transmission).
     auto directLight = [&](const Vec3& p, int lightMedium, const SampledSpectrum& r_p, auto&& evalScatter,
@@ -152,13 +163,7 @@ SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengt
                 });
             if (terminated || !beta || !r_u) return L;
             if (scattered) {
-                // Roulette on the MIS-weighted throughput.
-                const SampledSpectrum rrBeta = beta * etaScale / r_u.average();
-                if (rrBeta.maxComponent() < 1 && depth > 1) {
-                    const double q = std::max(0.0, 1.0 - rrBeta.maxComponent());
-                    if (rng.uniform() < q) return L;
-                    beta /= 1.0 - q;
-                }
+                if (!survivesRoulette()) return L;
                 continue;
             }
             beta *= T_maj / T_maj[0];
@@ -220,13 +225,7 @@ SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengt
         medium = mediumAfterCrossing(shape, hit->n, wi, medium);
         ray = Ray{offsetAlong(hit->p, n, wi, hit->epsilon), wi};
         if (!beta) break;
-
-        const SampledSpectrum rrBeta = beta * etaScale / r_u.average();
-        if (rrBeta.maxComponent() < 1 && depth > 1) {
-            const double q = std::max(0.0, 1.0 - rrBeta.maxComponent());
-            if (rng.uniform() < q) break;
-            beta /= 1.0 - q;
-        }
+        if (!survivesRoulette()) break;
     }
     return L;
 }

@@ -39,16 +39,11 @@ TEST(BeerLambert, PathTracedRadianceThroughAbsorber) {
     scene.finalize();
     const PathTracer tracer(scene);
     PathStats stats;
-    const int n = 200000;
-    double sum = 0, sum2 = 0;
-    for (int i = 0; i < n; ++i) {
+    const auto [mean, se] = testing::meanOf(200000, [&](int i) {
         Rng rng = Rng::forKey(5, static_cast<uint64_t>(i), 1);
         const SampledWavelengths wl = SampledWavelengths::sampleUniform(rng.uniform(), 400, 700);
-        const double v = tracer.radiance(Ray{Vec3(0, 0, -5), Vec3(0, 0, 1)}, kNone, wl, rng, stats).average();
-        sum += v;
-        sum2 += v * v;
-    }
-    const double mean = sum / n, se = std::sqrt((sum2 / n - mean * mean) / (n - 1));
+        return tracer.radiance(Ray{Vec3(0, 0, -5), Vec3(0, 0, 1)}, kNone, wl, rng, stats).average();
+    });
     EXPECT_NEAR(mean, Le * std::exp(-0.5 * 2.0), 4 * se) << "se " << se;
     EXPECT_LT(se, 0.01);
 }

@@ -8,6 +8,7 @@
 #include "core/math.h"
 #include "render/path_tracer.h"
 #include "render/renderer.h"
+#include "support/test_scenes.h"
 #include "spectral/color.h"
 
 namespace fluorosim {
@@ -82,16 +83,11 @@ TEST(Lights, SphereLightOverLambertianPlane) {
     scene.finalize();
     const PathTracer tracer(scene);
     PathStats stats;
-    const int n = 100000;
-    double sum = 0, sum2 = 0;
-    for (int i = 0; i < n; ++i) {
+    const auto [mean, se] = testing::meanOf(100000, [&](int i) {
         Rng rng = Rng::forKey(8, static_cast<uint64_t>(i), 2);
         const SampledWavelengths wl = SampledWavelengths::sampleUniform(rng.uniform(), 400, 700);
-        const double v = tracer.radiance(Ray{Vec3(0, 0.2, 0), Vec3(0, -1, 0)}, kNone, wl, rng, stats).average();
-        sum += v;
-        sum2 += v * v;
-    }
-    const double mean = sum / n, se = std::sqrt((sum2 / n - mean * mean) / (n - 1));
+        return tracer.radiance(Ray{Vec3(0, 0.2, 0), Vec3(0, -1, 0)}, kNone, wl, rng, stats).average();
+    });
     EXPECT_NEAR(mean, kRho * L * (r / D) * (r / D), 4 * se) << "stderr " << se;
     EXPECT_LT(se, 0.01 * mean);
 }

@@ -56,15 +56,10 @@ TEST(ReviewRegressions, TinyBeadFarFromOriginIsCrossedExactly) {
     EXPECT_NEAR(T[0], std::exp(-200.0 * 2 * r), 1e-9);
     // Path tracing through the bead: every path must come out and reach the enclosure (no stuck medium).
     PathStats stats;
-    double sum = 0, sum2 = 0;
-    const int n = 20000;
-    for (int i = 0; i < n; ++i) {
+    const auto [mean, se] = testing::meanOf(20000, [&](int i) {
         Rng rng = Rng::forKey(3, static_cast<uint64_t>(i), 0);
-        const double v = tracer.radiance(Ray{Vec3(100, 0, -1), Vec3(0, 0, 1)}, kNone, wl, rng, stats).average();
-        sum += v;
-        sum2 += v * v;
-    }
-    const double mean = sum / n, se = std::sqrt((sum2 / n - mean * mean) / (n - 1));
+        return tracer.radiance(Ray{Vec3(100, 0, -1), Vec3(0, 0, 1)}, kNone, wl, rng, stats).average();
+    });
     EXPECT_NEAR(mean, std::exp(-0.4), 4 * se + 1e-12);
 }
 

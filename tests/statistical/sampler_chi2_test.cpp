@@ -32,6 +32,9 @@ using chi2::DirectionalResult;
 using chi2::DirectionalTest;
 using chi2::SphericalGrid;
 
+// Inverse-CDF exponential distance with rate sigma, for the harness's deliberately wrong sampler.
+double sampleExponential(double u, double sigma) { return -std::log(1.0 - u) / sigma; }
+
 double relDiff(double a, double b) {
     const double s = std::max(std::abs(a), std::abs(b));
     return s > 0 ? std::abs(a - b) / s : 0.0;

@@ -40,24 +40,12 @@ struct Estimate {
     double mean = 0, stderr_ = 0;
 };
 
-// Mean and standard error of the wavelength-averaged radiance along rays from `origin` in random
-// directions towards the unit ball at `target` (each path is one independent sample).
-inline Estimate meanRadiance(const Scene& scene, const Vec3& origin, int originMedium, const Vec3& target, double targetRadius,
-                             int paths, uint64_t seed, double lambdaMin = 400, double lambdaMax = 700) {
-    const PathTracer tracer(scene);
-    const WavelengthSampler ws(lambdaMin, lambdaMax, {}, true);
+// Mean and standard error of `paths` independent estimates estimate(i).
+template <class Estimator>
+Estimate meanOf(int paths, Estimator&& estimate) {
     double sum = 0, sum2 = 0;
-    PathStats stats;
     for (int i = 0; i < paths; ++i) {
-        Rng rng = Rng::forKey(seed, static_cast<uint64_t>(i), 7);
-        const SampledWavelengths wl = ws.sample(rng.uniform(), rng.uniform());
-        // Aim at a random point of the target ball, so paths see its whole volume.
-        Vec3 p;
-        do p = Vec3(2 * rng.uniform() - 1, 2 * rng.uniform() - 1, 2 * rng.uniform() - 1);
-        while (dot(p, p) > 1);
-        const Vec3 dir = normalize(target + p * targetRadius - origin);
-        const SampledSpectrum L = tracer.radiance(Ray{origin, dir}, originMedium, wl, rng, stats);
-        const double v = L.average();
+        const double v = estimate(i);
         sum += v;
         sum2 += v * v;
     }
@@ -66,6 +54,25 @@ inline Estimate meanRadiance(const Scene& scene, const Vec3& origin, int originM
     e.mean = sum / n;
     e.stderr_ = std::sqrt(std::max(0.0, sum2 / n - e.mean * e.mean) / (n - 1));
     return e;
+}
+
+// Mean and standard error of the wavelength-averaged radiance along rays from `origin` in random
+// directions towards the unit ball at `target` (each path is one independent sample).
+inline Estimate meanRadiance(const Scene& scene, const Vec3& origin, int originMedium, const Vec3& target, double targetRadius,
+                             int paths, uint64_t seed, double lambdaMin = 400, double lambdaMax = 700) {
+    const PathTracer tracer(scene);
+    const WavelengthSampler ws(lambdaMin, lambdaMax, {}, true);
+    PathStats stats;
+    return meanOf(paths, [&](int i) {
+        Rng rng = Rng::forKey(seed, static_cast<uint64_t>(i), 7);
+        const SampledWavelengths wl = ws.sample(rng.uniform(), rng.uniform());
+        // Aim at a random point of the target ball, so paths see its whole volume.
+        Vec3 p;
+        do p = Vec3(2 * rng.uniform() - 1, 2 * rng.uniform() - 1, 2 * rng.uniform() - 1);
+        while (dot(p, p) > 1);
+        const Vec3 dir = normalize(target + p * targetRadius - origin);
+        return tracer.radiance(Ray{origin, dir}, originMedium, wl, rng, stats).average();
+    });
 }
 
 }  // namespace fluorosim::testing
