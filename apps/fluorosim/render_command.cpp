@@ -59,7 +59,8 @@ double autoExposure(const ExrImage& img) {
     return count ? 0.18 / std::exp(logSum / static_cast<double>(count)) : 1.0;
 }
 
-void writeOutputs(const fs::path& out, const Film& film, const Scene& scene, int sppDone, const RenderSummary* summary) {
+// Writes the EXR and the PNG preview next to it; returns the preview's path.
+fs::path writeOutputs(const fs::path& out, const Film& film, const Scene& scene, int sppDone, const RenderSummary* summary) {
     ExrImage img = film.image(sppDone);
     img.attributes["fluorosim.spp"] = std::to_string(sppDone);
     img.attributes["fluorosim.seed"] = std::to_string(scene.render.seed);
@@ -72,6 +73,7 @@ void writeOutputs(const fs::path& out, const Film& film, const Scene& scene, int
     fs::path png = out;
     png.replace_extension(".png");
     writePngPreview(png.string(), img.width, img.height, img.rgb, autoExposure(img));
+    return png;
 }
 
 void runRender(const RenderArgs& a) {
@@ -108,9 +110,7 @@ void runRender(const RenderArgs& a) {
     const RenderSummary s = render(scene, film, opt);
     bar.finish();
     if (s.sppCompleted == 0) throw Error("interrupted before the first pass finished; nothing written");
-    writeOutputs(out, film, scene, s.sppCompleted, &s);
-    fs::path png = out;
-    png.replace_extension(".png");
+    const fs::path png = writeOutputs(out, film, scene, s.sppCompleted, &s);
     const double bounces = static_cast<double>(s.stats.scatteringEvents + s.stats.surfaceBounces) / std::max<double>(1.0, static_cast<double>(s.stats.paths));
     const nlohmann::json summary = {{"image", out.string()},
                                     {"preview", png.string()},
