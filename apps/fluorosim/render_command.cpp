@@ -30,6 +30,7 @@ struct RenderArgs {
     std::optional<int> spp;
     int threads = 0;
     std::optional<uint64_t> seed;
+    std::string fluorescence;
     double checkpointSeconds = 60;
 };
 
@@ -86,6 +87,11 @@ void runRender(const RenderArgs& a) {
         [&db](const std::string& name, std::optional<double> ec, std::optional<double> qy) { return db.fluorophore(name, ec, qy); });
     for (const std::string& w : scene.warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
     if (a.seed) scene.render.seed = *a.seed;
+    if (!a.fluorescence.empty()) {
+        const auto model = fluorescenceModelFromName(a.fluorescence);
+        if (!model) throw ConfigError("--fluorescence: expected full, paper or none, got \"" + a.fluorescence + "\"");
+        scene.render.fluorescence = *model;
+    }
     RenderOptions opt;
     opt.spp = a.spp.value_or(scene.render.spp);
     opt.validate();
@@ -94,7 +100,8 @@ void runRender(const RenderArgs& a) {
     // One sample per pixel per pass: Ctrl-C then waits at most one pass, and checkpoints stay fresh.
     opt.sppPerPass = 1;
     opt.cancel = &gCancel;
-    Film film(scene.camera.width, scene.camera.height, scene.spectral.lambdaMin, scene.spectral.lambdaMax, scene.spectral.binWidth, db.cie1931());
+    Film film(scene.camera.width, scene.camera.height, scene.spectral.lambdaMin, scene.spectral.lambdaMax, scene.spectral.binWidth, db.cie1931(),
+              FluorescencePlan(scene).active());
     ProgressBar bar("render");
     opt.progress = [&](double f) { bar.update(f); };
     auto lastCheckpoint = std::chrono::steady_clock::now();
@@ -120,6 +127,8 @@ void runRender(const RenderArgs& a) {
                                     {"mean_path_vertices", bounces},
                                     {"non_finite_samples", s.nonFiniteSamples},
                                     {"truncated_paths", s.stats.truncated},
+                                    {"fluorescence", fluorescenceModelName(scene.render.fluorescence)},
+                                    {"fluorescence_branches", s.stats.fluorescenceBranches},
                                     {"cancelled", s.cancelled}};
     std::printf("%s\n", summary.dump().c_str());
     std::fflush(stdout);
@@ -140,6 +149,8 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_option("--spp", args->spp, "Samples per pixel (default: the scene's)");
     cmd->add_option("--threads", args->threads, "Threads (0 = all cores)");
     cmd->add_option("--seed", args->seed, "Random seed (default: the scene's)");
+    cmd->add_option("--fluorescence", args->fluorescence,
+                    "Fluorescence model: full (unbiased, default), paper (Abdellah et al.: one event, direct light) or none");
     cmd->add_option("--checkpoint-seconds", args->checkpointSeconds, "Write the image every this many seconds");
     cmd->callback([args] { runRender(*args); });
 }

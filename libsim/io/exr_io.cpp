@@ -47,6 +47,9 @@ void validate(const std::string& path, const ExrImage& image) {
     if (image.rgb.size() != 3 * pixels)
         throw ConfigError(path + ": rgb has " + std::to_string(image.rgb.size()) + " values, expected " +
                           std::to_string(3 * pixels) + " (3 x width x height)");
+    for (const RgbLayer& layer : image.rgbLayers)
+        if (layer.prefix.empty() || layer.rgb.size() != 3 * pixels)
+            throw ConfigError(path + ": RGB layer '" + layer.prefix + "' needs a prefix and 3 x width x height values");
     for (const SpectralLayer& layer : image.spectral) {
         const std::size_t expected = layer.wavelengthsNm.size() * pixels;
         if (layer.values.size() != expected)
@@ -86,6 +89,9 @@ void writeExr(const std::string& path, const ExrImage& image) {
     std::vector<ChannelSource> sources;
     const char* rgbNames[3] = {"R", "G", "B"};
     for (std::size_t c = 0; c < 3; ++c) sources.push_back({rgbNames[c], image.rgb.data() + c, 3 * sizeof(float)});
+    for (const RgbLayer& layer : image.rgbLayers)
+        for (std::size_t c = 0; c < 3; ++c)
+            sources.push_back({layer.prefix + "." + rgbNames[c], layer.rgb.data() + c, 3 * sizeof(float)});
     for (const SpectralLayer& layer : image.spectral) {
         for (std::size_t bin = 0; bin < layer.wavelengthsNm.size(); ++bin) {
             std::string name = spectralChannelName(layer.wavelengthsNm[bin]);

@@ -8,14 +8,21 @@ namespace fluorosim {
 
 // One spectral layer: bins centred at `wavelengthsNm`, values[bin * width * height + y * width + x].
 struct SpectralLayer {
-    std::string prefix;                // "" for the main layer, else e.g. "fluorescence" (later issues)
+    std::string prefix;                // "" for the main layer, else e.g. "fluorescent"
     std::vector<double> wavelengthsNm;
     std::vector<float> values;
+};
+
+// Extra RGB channels "<prefix>.R", "<prefix>.G", "<prefix>.B", interleaved like ExrImage::rgb.
+struct RgbLayer {
+    std::string prefix;
+    std::vector<float> rgb;
 };
 
 struct ExrImage {
     int width = 0, height = 0;
     std::vector<float> rgb;            // linear sRGB, interleaved, row-major from the top
+    std::vector<RgbLayer> rgbLayers;
     std::vector<SpectralLayer> spectral;
     std::map<std::string, std::string> attributes;  // written as string header attributes
 };

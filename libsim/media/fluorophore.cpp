@@ -1,10 +1,25 @@
 #include "media/fluorophore.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "core/errors.h"
 
 namespace fluorosim {
+namespace {
+
+// The spectrum is piecewise linear, so it is nonzero strictly between the zero samples that bracket
+// its nonzero ones.
+std::pair<double, double> support(const TabulatedSpectrum& s) {
+    const auto& l = s.wavelengths();
+    const auto& v = s.values();
+    size_t first = 0, last = v.size() - 1;
+    while (first < v.size() && v[first] == 0) ++first;
+    while (last > first && v[last] == 0) --last;
+    return {l[first > 0 ? first - 1 : 0], l[std::min(v.size() - 1, last + 1)]};
+}
+
+}  // namespace
 
 Fluorophore::Fluorophore(std::string id, const TabulatedSpectrum& excitationRelative, double extinctionPeak,
                          const TabulatedSpectrum& emissionRelative, double quantumYield)
@@ -19,6 +34,9 @@ Fluorophore::Fluorophore(std::string id, const TabulatedSpectrum& excitationRela
     const double area = emissionRelative.integral();
     if (!(area > 0)) throw ConfigError("dye \"" + id_ + "\": the emission spectrum is zero everywhere");
     emission_ = emissionRelative.scaled(1.0 / area);
+    emissionMax_ = emission_.maxValue();
+    excitationSupport_ = support(excitation_);
+    emissionSupport_ = support(emission_);
 }
 
 }  // namespace fluorosim

@@ -1,8 +1,9 @@
 #pragma once
 // A fluorescent dye: absorption through its molar extinction spectrum, re-emission through its
-// quantum yield and emission spectrum. This build uses the absorption; re-emission (the inelastic
-// source term) is not simulated yet, and scenes with dyes say so in Scene::warnings.
+// quantum yield and emission spectrum (Kasha-Vavilov: the emission spectrum does not depend on the
+// excitation wavelength, so the inelastic kernel is separable; see docs/model.md).
 #include <string>
+#include <utility>
 
 #include "core/math.h"
 #include "spectral/tabulated_spectrum.h"
@@ -27,6 +28,10 @@ public:
     // Emission spectrum as a probability density over wavelength (1/nm, photon units).
     double emissionPdf(double lambdaNm) const { return emission_(lambdaNm); }
     const TabulatedSpectrum& emission() const { return emission_; }
+    double emissionPdfMax() const { return emissionMax_; }
+    // Smallest intervals outside which the spectra are exactly zero (nm).
+    std::pair<double, double> excitationSupport() const { return excitationSupport_; }
+    std::pair<double, double> emissionSupport() const { return emissionSupport_; }
 
 private:
     std::string id_;
@@ -34,14 +39,21 @@ private:
     double extinctionPeak_;
     TabulatedSpectrum emission_;    // unit integral
     double quantumYield_;
+    double emissionMax_;
+    std::pair<double, double> excitationSupport_, emissionSupport_;
 };
 
 // Absorption coefficient of a dye, mu_a = ln(10) epsilon(lambda) c, in 1/mm for c in mol/L.
 // Templated on the scalar so that fitting code can differentiate it (e.g. with ceres::Jet).
+inline constexpr double kLn10PerCmToPerMm = kLn10 * 0.1;
 template <class Scalar>
 Scalar dyeAbsorption(const Fluorophore& dye, double lambdaNm, const Scalar& molar) {
-    constexpr double kPerCmToPerMm = 0.1;
-    return molar * (kLn10 * dye.molarExtinction(lambdaNm) * kPerCmToPerMm);
+    return molar * (kLn10PerCmToPerMm * dye.molarExtinction(lambdaNm));
+}
+// The same at the excitation peak.
+template <class Scalar>
+Scalar dyePeakAbsorption(const Fluorophore& dye, const Scalar& molar) {
+    return molar * (kLn10PerCmToPerMm * dye.extinctionPeak());
 }
 
 }  // namespace fluorosim

@@ -53,6 +53,9 @@ public:
             m.sigmaA[i] = absorptionCoefficient<double>(sigmaA_, dyes_, molar_, wl.lambda[i]);
         return m;
     }
+    // Total absorption (solvent and dyes) and scattering at one wavelength, 1/mm.
+    double absorptionAt(double lambdaNm) const { return absorptionCoefficient<double>(sigmaA_, dyes_, molar_, lambdaNm); }
+    double scatteringAt(double lambdaNm) const { return sigmaS_(lambdaNm); }
     HomogeneousMajorantIterator<SampledSpectrum> majorants(double tMin, double tMax,
                                                            const SampledWavelengths& wl) const {
         const MediumSample m = coefficients(wl);

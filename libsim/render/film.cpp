@@ -3,14 +3,16 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <array>
 #include <string>
 
 #include "core/errors.h"
 
 namespace fluorosim {
 
-Film::Film(int width, int height, double lambdaMin, double lambdaMax, double binWidth, ColorMatchingFunctions cmf)
-    : width_(width), height_(height), lambdaMin_(lambdaMin), binWidth_(binWidth), cmf_(std::move(cmf)) {
+Film::Film(int width, int height, double lambdaMin, double lambdaMax, double binWidth, ColorMatchingFunctions cmf,
+           bool separateComponents)
+    : width_(width), height_(height), lambdaMin_(lambdaMin), binWidth_(binWidth), separate_(separateComponents), cmf_(std::move(cmf)) {
     if (width <= 0 || height <= 0 || static_cast<int64_t>(width) * height > (int64_t(1) << 26))
         throw ConfigError("film resolution must be positive and at most 2^26 pixels, got " + std::to_string(width) + "x" +
                           std::to_string(height));
@@ -26,28 +28,37 @@ Film::Film(int width, int height, double lambdaMin, double lambdaMax, double bin
     yIntegral_ = cmf_.y.integral();
     if (!(yIntegral_ > 0)) throw ConfigError("colour matching function y has zero integral");
     const size_t pixels = static_cast<size_t>(width) * static_cast<size_t>(height);
-    xyz_.assign(3 * pixels, 0.0);
-    spectral_.assign(static_cast<size_t>(bins) * pixels, 0.0);
+    for (int c = 0; c < 2; ++c) {
+        xyz_[c].assign(3 * pixels, 0.0);
+        spectral_[c].assign(static_cast<size_t>(bins) * pixels, 0.0);
+    }
     nonFinite_.assign(pixels, 0);
 }
 
-void Film::addSample(int x, int y, const SampledSpectrum& L, const SampledWavelengths& wl) {
+void Film::addSample(int x, int y, const PathRadiance& L, const SampledWavelengths& wl) {
     const size_t pixel = static_cast<size_t>(y) * static_cast<size_t>(width_) + static_cast<size_t>(x);
-    if (!L.isFinite()) {
+    if (!L.elastic.isFinite() || !L.fluorescent.isFinite()) {
         ++nonFinite_[pixel];
         return;
     }
+    accumulate(pixel, kElastic, L.elastic, wl);
+    accumulate(pixel, kFluorescent, L.fluorescent, wl);
+}
+
+void Film::accumulate(size_t pixel, Component component, const SampledSpectrum& L, const SampledWavelengths& wl) {
     const int bins = binCount();
+    std::vector<double>& xyz = xyz_[component];
+    std::vector<double>& spectral = spectral_[component];
     for (int i = 0; i < kNumWavelengths; ++i) {
         if (wl.pdf[i] == 0 || L[i] == 0) continue;
         const double c = L[i] / wl.pdf[i] / kNumWavelengths;
         const double l = wl.lambda[i];
-        xyz_[3 * pixel + 0] += c * cmf_.x(l) / yIntegral_;
-        xyz_[3 * pixel + 1] += c * cmf_.y(l) / yIntegral_;
-        xyz_[3 * pixel + 2] += c * cmf_.z(l) / yIntegral_;
+        xyz[3 * pixel + 0] += c * cmf_.x(l) / yIntegral_;
+        xyz[3 * pixel + 1] += c * cmf_.y(l) / yIntegral_;
+        xyz[3 * pixel + 2] += c * cmf_.z(l) / yIntegral_;
         // A line exactly at the range maximum belongs to the last bin.
         const int b = std::min(bins - 1, static_cast<int>(std::floor((l - lambdaMin_) / binWidth_)));
-        if (b >= 0 && b < bins) spectral_[pixel * static_cast<size_t>(bins) + static_cast<size_t>(b)] += c / binWidths_[static_cast<size_t>(b)];
+        if (b >= 0 && b < bins) spectral[pixel * static_cast<size_t>(bins) + static_cast<size_t>(b)] += c / binWidths_[static_cast<size_t>(b)];
     }
 }
 
@@ -56,19 +67,39 @@ ExrImage Film::image(int spp) const {
     img.width = width_;
     img.height = height_;
     const size_t pixels = static_cast<size_t>(width_) * static_cast<size_t>(height_);
-    const double inv = spp > 0 ? 1.0 / spp : 0.0;
-    img.rgb.resize(3 * pixels);
-    for (size_t p = 0; p < pixels; ++p) {
-        const Rgb rgb = xyzToLinearSrgb({xyz_[3 * p] * inv, xyz_[3 * p + 1] * inv, xyz_[3 * p + 2] * inv});
-        for (int c = 0; c < 3; ++c) img.rgb[3 * p + static_cast<size_t>(c)] = static_cast<float>(rgb[static_cast<size_t>(c)]);
-    }
-    SpectralLayer layer;
-    layer.wavelengthsNm = binCenters_;
     const size_t bins = binCenters_.size();
-    layer.values.resize(bins * pixels);
-    for (size_t p = 0; p < pixels; ++p)
-        for (size_t b = 0; b < bins; ++b) layer.values[b * pixels + p] = static_cast<float>(spectral_[p * bins + b] * inv);
-    img.spectral.push_back(std::move(layer));
+    const double inv = spp > 0 ? 1.0 / spp : 0.0;
+    // weights[c]: how much of each component goes into the layer.
+    auto rgbOf = [&](std::array<double, 2> weights) {
+        std::vector<float> rgb(3 * pixels);
+        for (size_t p = 0; p < pixels; ++p) {
+            std::array<double, 3> xyz{};
+            for (int c = 0; c < 2; ++c)
+                for (int k = 0; k < 3; ++k) xyz[static_cast<size_t>(k)] += weights[static_cast<size_t>(c)] * xyz_[c][3 * p + static_cast<size_t>(k)] * inv;
+            const Rgb v = xyzToLinearSrgb({xyz[0], xyz[1], xyz[2]});
+            for (int k = 0; k < 3; ++k) rgb[3 * p + static_cast<size_t>(k)] = static_cast<float>(v[static_cast<size_t>(k)]);
+        }
+        return rgb;
+    };
+    auto spectralOf = [&](std::array<double, 2> weights, std::string prefix) {
+        SpectralLayer layer;
+        layer.prefix = std::move(prefix);
+        layer.wavelengthsNm = binCenters_;
+        layer.values.resize(bins * pixels);
+        for (size_t p = 0; p < pixels; ++p)
+            for (size_t b = 0; b < bins; ++b)
+                layer.values[b * pixels + p] = static_cast<float>(
+                    (weights[0] * spectral_[0][p * bins + b] + weights[1] * spectral_[1][p * bins + b]) * inv);
+        return layer;
+    };
+    img.rgb = rgbOf({1, 1});
+    img.spectral.push_back(spectralOf({1, 1}, ""));
+    if (separate_) {
+        img.rgbLayers.push_back({"elastic", rgbOf({1, 0})});
+        img.rgbLayers.push_back({"fluorescent", rgbOf({0, 1})});
+        img.spectral.push_back(spectralOf({1, 0}, "elastic"));
+        img.spectral.push_back(spectralOf({0, 1}, "fluorescent"));
+    }
     return img;
 }
 
@@ -76,7 +107,8 @@ uint64_t Film::nonFiniteSamples() const { return std::accumulate(nonFinite_.begi
 
 double Film::meanLuminance(int spp) const {
     double sum = 0;
-    for (size_t p = 1; p < xyz_.size(); p += 3) sum += xyz_[p];
+    for (const auto& xyz : xyz_)
+        for (size_t p = 1; p < xyz.size(); p += 3) sum += xyz[p];
     return spp > 0 ? sum / spp / (static_cast<double>(width_) * height_) : 0.0;
 }
 

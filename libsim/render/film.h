@@ -1,10 +1,14 @@
 #pragma once
 // Per-pixel spectral and XYZ accumulation. Each pixel is written by one work item at a time, in
-// sample order, so the image is bit-identical for any thread count.
+// sample order, so the image is bit-identical for any thread count. The elastic and fluorescent
+// parts of each sample are accumulated apart; the main image is their sum, and with
+// `separateComponents` the image also carries them as "elastic" and "fluorescent" layers.
+#include <array>
 #include <cstdint>
 #include <vector>
 
 #include "io/image_io.h"
+#include "render/path_tracer.h"
 #include "spectral/color.h"
 #include "spectral/sampled_wavelengths.h"
 
@@ -12,14 +16,15 @@ namespace fluorosim {
 
 class Film {
 public:
-    Film(int width, int height, double lambdaMin, double lambdaMax, double binWidth, ColorMatchingFunctions cmf);
+    Film(int width, int height, double lambdaMin, double lambdaMax, double binWidth, ColorMatchingFunctions cmf,
+         bool separateComponents = false);
     int width() const { return width_; }
     int height() const { return height_; }
     int binCount() const { return static_cast<int>(binCenters_.size()); }
     const std::vector<double>& binCenters() const { return binCenters_; }
 
     // Adds one path's radiance estimate; non-finite estimates are counted and dropped.
-    void addSample(int x, int y, const SampledSpectrum& L, const SampledWavelengths& wl);
+    void addSample(int x, int y, const PathRadiance& L, const SampledWavelengths& wl);
     // Mean over `samplesPerPixel`: spectral radiance per bin (per nm) and XYZ (Y = luminance-weighted
     // radiance normalized so a flat spectrum of 1 gives Y = 1).
     ExrImage image(int samplesPerPixel) const;
@@ -27,13 +32,17 @@ public:
     double meanLuminance(int samplesPerPixel) const;
 
 private:
+    enum Component { kElastic = 0, kFluorescent = 1 };
+    void accumulate(size_t pixel, Component c, const SampledSpectrum& L, const SampledWavelengths& wl);
+
     int width_, height_;
     double lambdaMin_, binWidth_;
+    bool separate_;
     std::vector<double> binCenters_, binWidths_;
     ColorMatchingFunctions cmf_;
     double yIntegral_;
-    std::vector<double> xyz_;       // 3 per pixel
-    std::vector<double> spectral_;  // bins per pixel
+    std::array<std::vector<double>, 2> xyz_;       // 3 per pixel, per component
+    std::array<std::vector<double>, 2> spectral_;  // bins per pixel, per component
     std::vector<uint32_t> nonFinite_;
 };
 

@@ -63,14 +63,97 @@ SampledSpectrum PathTracer::transmittance(const Vec3& p0, const Vec3& p1, int me
     return SampledSpectrum(0.0);
 }
 
-SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const {
-    SampledSpectrum L(0.0), beta(1.0), r_u(1.0), r_l(1.0);
+struct PathTracer::PathState {
+    Ray ray;
+    int medium = kNone;
+    SampledSpectrum beta{1.0}, r_u{1.0}, r_l{1.0};
     bool specularBounce = false;
     double etaScale = 1.0;
     int depth = 0;
-    Vec3 prevScatter = ray.o;
-    ++stats.paths;
+    Vec3 prevScatter;
+    int generation = 0;             // fluorescence events before this path
+    bool startsAtEmission = false;  // ray.o is a re-emission point with an isotropic direction still to choose
+};
 
+PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const {
+    ++stats.paths;
+    PathState state;
+    state.ray = ray;
+    state.medium = medium;
+    state.prevScatter = ray.o;
+    return trace(state, wl, rng, stats);
+}
+
+SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const SampledWavelengths& wl, const SampledSpectrum& weight,
+                                         Rng& rng, PathStats& stats, int generation, int depth) const {
+    // Generations are ended by roulette; this cap only guards the stack and is reported if reached.
+    constexpr int kMaxGenerations = 64;
+    if (generation >= kMaxGenerations) {
+        ++stats.truncated;
+        return SampledSpectrum(0.0);
+    }
+    const SampledWavelengths wlx = fluorescence_.sampleExcitation(rng.uniform(), rng.uniform());
+    // A[j][k]: throughput from the mean radiance at excitation wavelength k to camera wavelength j,
+    // Σ_k A[j][k] Lx[k] being the hero-wavelength estimate of ∫ K(λx -> λj) (1/4π)∫L dω dλx.
+    double A[kNumWavelengths][kNumWavelengths] = {};
+    SampledSpectrum start(0.0);  // initial throughput of the sub-path per excitation slot
+    for (int k = 0; k < kNumWavelengths; ++k) {
+        if (wlx.pdf[k] == 0) continue;
+        for (int j = 0; j < kNumWavelengths; ++j) {
+            if (weight[j] == 0) continue;
+            A[j][k] = weight[j] * fluorescence_.kernel(medium, wlx.lambda[k], wl.lambda[j]) / (wlx.pdf[k] * kNumWavelengths);
+            start[k] = std::max(start[k], A[j][k]);
+        }
+    }
+    // Roulette on the branch's throughput keeps the number of sub-paths proportional to the energy
+    // they carry, so re-absorption cascades (continuous to continuous wavelengths) stay subcritical
+    // however often paths branch. At a line the throughput is per nm of camera bandwidth, not a
+    // fraction, so line branches are always traced; they cannot cascade among themselves.
+    const double a = start.maxComponent();
+    if (!(a > 0)) return SampledSpectrum(0.0);
+    double survival = 1.0;
+    if (!wlx.discrete && a < 1) {
+        if (rng.uniform() >= a) return SampledSpectrum(0.0);
+        survival = a;
+    }
+    start /= wlx.discrete ? a : std::min(a, 1.0);  // the sub-path starts with throughput <= 1
+    ++stats.fluorescenceBranches;
+    // Lx: (1/4π)∫L dω at the excitation wavelengths, times `start`.
+    SampledSpectrum Lx(0.0);
+    if (fluorescence_.model() == FluorescenceModel::Paper) {
+        const double uLight = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform();
+        if (const auto ls = lights_.sample(p, uLight, u1, u2, wlx); ls && ls->L && ls->pdf > 0)
+            Lx = start * transmittance(p, ls->p, medium, wlx) * ls->L * (kInv4Pi / ls->pdf);
+    } else {
+        PathState sub;
+        sub.ray = Ray{p, Vec3(0, 0, 1)};
+        sub.medium = medium;
+        sub.beta = start;
+        sub.prevScatter = p;
+        sub.depth = depth;
+        sub.generation = generation + 1;
+        sub.startsAtEmission = true;
+        Lx = trace(sub, wlx, rng, stats).total();
+    }
+    SampledSpectrum result(0.0);
+    for (int k = 0; k < kNumWavelengths; ++k) {
+        if (Lx[k] == 0) continue;
+        for (int j = 0; j < kNumWavelengths; ++j) result[j] += A[j][k] / (start[k] * survival) * Lx[k];
+    }
+    return result;
+}
+
+PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const {
+    SampledSpectrum L(0.0), Lf(0.0);
+    SampledSpectrum& beta = st.beta;
+    SampledSpectrum& r_u = st.r_u;
+    SampledSpectrum& r_l = st.r_l;
+    Ray& ray = st.ray;
+    int& medium = st.medium;
+    int& depth = st.depth;
+    bool& specularBounce = st.specularBounce;
+    double& etaScale = st.etaScale;
+    Vec3& prevScatter = st.prevScatter;
     // Roulette on the MIS-weighted throughput; survivors are rescaled so max(rrBeta) <= 1 afterwards.
     auto survivesRoulette = [&]() {
         const SampledSpectrum rrBeta = beta * etaScale / r_u.average();
@@ -101,6 +184,30 @@ SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengt
         return beta * fHat * T * ls->L / (rl + ru).average();
     };
 
+    // A real scattering vertex in a medium: NEE with MIS, then a new direction from the phase function
+    // (sampled exactly, so f / pdf = 1 and beta is unchanged).
+    auto scatterInMedium = [&](const Vec3& p, const HenyeyGreenstein& phase) {
+        const Vec3 dirIn = ray.d;
+        L += directLight(
+            p, medium, r_u,
+            [&](const Vec3& wi) {
+                const double v = phase.pdf(dirIn, wi);
+                return std::pair{SampledSpectrum(v), v};
+            },
+            Vec3(), nullptr, 0.0);
+        double phasePdf = 0;
+        const Vec3 wi = phase.sample(dirIn, rng.uniform(), rng.uniform(), &phasePdf);
+        r_l = r_u / phasePdf;
+        prevScatter = p;
+        specularBounce = false;
+        ray = Ray{p, wi};
+    };
+
+    if (st.startsAtEmission) {
+        static const HenyeyGreenstein isotropic(0.0);
+        scatterInMedium(ray.o, isotropic);
+    }
+
     while (true) {
         const auto hit = scene_.geometry.intersect(ray, 0.0, std::numeric_limits<double>::infinity());
         if (medium != kNone && !scene_.media[static_cast<size_t>(medium)].isVacuumLike()) {
@@ -108,8 +215,21 @@ SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengt
             const double tMax = hit ? hit->t : std::numeric_limits<double>::infinity();
             bool scattered = false, terminated = false;
             const MediumSample mp = med.coefficients(wl);
+            // Fluorescence branch points are extra null density, so the source term is sampled even
+            // where the dye barely absorbs at these wavelengths.
+            const bool dyed = fluorescence_.active(medium);
+            SampledSpectrum sigmaB(0.0);
+            if (dyed)
+                for (int j = 0; j < kNumWavelengths; ++j) sigmaB[j] = fluorescence_.branchDensity(medium, wl.lambda[j]);
+            HomogeneousMajorantIterator<SampledSpectrum> majorants{0.0, tMax, mp.sigmaA + mp.sigmaS + sigmaB};
             const SampledSpectrum T_maj = sampleTmaj<SampledSpectrum>(
-                med.majorants(0.0, tMax, wl), rng, [&](double t, const SampledSpectrum& sigmaMaj, const SampledSpectrum& Tm) {
+                majorants, rng, [&](double t, const SampledSpectrum& sigmaMaj, const SampledSpectrum& Tm) {
+                    if (dyed && rng.uniform() * sigmaMaj[0] < sigmaB[0]) {
+                        const double pdf = Tm[0] * sigmaB[0];
+                        const SampledSpectrum r_e = r_u * sigmaB * Tm / pdf;
+                        if (r_e)
+                            Lf += fluorescence(ray.at(t), medium, wl, beta * Tm / (pdf * r_e.average()), rng, stats, st.generation, depth);
+                    }
                     const double pAbsorb = mp.sigmaA[0] / sigmaMaj[0];
                     const double pScatter = mp.sigmaS[0] / sigmaMaj[0];
                     const double pNull = std::max(0.0, 1.0 - pAbsorb - pScatter);
@@ -130,23 +250,7 @@ SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengt
                             return false;
                         }
                         if (beta && r_u) {
-                            const Vec3 p = ray.at(t);
-                            const HenyeyGreenstein& phase = med.phase();
-                            const Vec3 dirIn = ray.d;
-                            L += directLight(
-                                p, medium, r_u,
-                                [&](const Vec3& wi) {
-                                    const double v = phase.pdf(dirIn, wi);
-                                    return std::pair{SampledSpectrum(v), v};
-                                },
-                                Vec3(), nullptr, 0.0);
-                            double phasePdf = 0;
-                            const Vec3 wi = phase.sample(dirIn, rng.uniform(), rng.uniform(), &phasePdf);
-                            // HG is sampled exactly, so f / pdf = 1 and beta is unchanged.
-                            r_l = r_u / phasePdf;
-                            prevScatter = p;
-                            specularBounce = false;
-                            ray = Ray{p, wi};
+                            scatterInMedium(ray.at(t), med.phase());
                             scattered = true;
                         }
                         return false;
@@ -161,9 +265,9 @@ SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengt
                     }
                     return bool(beta) && bool(r_u);
                 });
-            if (terminated || !beta || !r_u) return L;
+            if (terminated || !beta || !r_u) return {L, Lf};
             if (scattered) {
-                if (!survivesRoulette()) return L;
+                if (!survivesRoulette()) return {L, Lf};
                 continue;
             }
             beta *= T_maj / T_maj[0];
@@ -227,7 +331,7 @@ SampledSpectrum PathTracer::radiance(Ray ray, int medium, const SampledWavelengt
         if (!beta) break;
         if (!survivesRoulette()) break;
     }
-    return L;
+    return {L, Lf};
 }
 
 }  // namespace fluorosim

@@ -3,9 +3,16 @@
 // with path-space spectral MIS through rescaled path pdfs (r_u, r_l), next-event estimation with
 // MIS at surfaces and in media, free flights through sampleTmaj, and Russian roulette on the
 // MIS-weighted throughput (bounded by 1, so surviving weights cannot explode).
+//
+// Fluorescence: at every tentative collision in a dyed medium a camera path branches, with a
+// probability set by FluorescencePlan::branchDensity, into an excitation sub-path that estimates the
+// inelastic source term at new (excitation) wavelengths, then continues elastically. The sub-path is
+// a full path of its own (multiple scattering, NEE, further fluorescence generations) in the full
+// model, and a single transmittance-weighted light connection in the paper's model.
 #include <cstdint>
 
 #include "core/rng.h"
+#include "render/fluorescence.h"
 #include "scene/light_sampler.h"
 #include "scene/scene.h"
 
@@ -15,31 +22,49 @@ struct PathStats {
     uint64_t paths = 0;
     uint64_t scatteringEvents = 0;   // real collisions in media
     uint64_t surfaceBounces = 0;
+    uint64_t fluorescenceBranches = 0;  // excitation sub-paths started
     uint64_t truncated = 0;          // paths stopped by the safety depth cap (a bias, so it is reported)
     void add(const PathStats& o) {
         paths += o.paths;
         scatteringEvents += o.scatteringEvents;
         surfaceBounces += o.surfaceBounces;
+        fluorescenceBranches += o.fluorescenceBranches;
         truncated += o.truncated;
     }
 };
 
+// Radiance at the camera's wavelengths, split by history: `fluorescent` has gone through at least
+// one re-emission, `elastic` never has (it includes elastically scattered excitation light).
+struct PathRadiance {
+    SampledSpectrum elastic, fluorescent;
+    SampledSpectrum total() const { return elastic + fluorescent; }
+};
+
 class PathTracer {
 public:
-    explicit PathTracer(const Scene& scene) : scene_(scene), lights_(scene) {}
+    explicit PathTracer(const Scene& scene) : scene_(scene), lights_(scene), fluorescence_(scene) {}
     // Radiance arriving along -ray.d at ray.o, for a ray that starts in `medium`.
-    SampledSpectrum radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;
+    PathRadiance radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;
 
     // Transmittance from p0 to p1 through null interfaces and media; zero if a surface blocks.
     // When p0 lies on a surface, pass its normal so the ray leaves it without self-intersection.
     SampledSpectrum transmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl,
                                   const Vec3* surfaceNormal = nullptr, double surfaceEpsilon = 0.0) const;
 
+    const FluorescencePlan& fluorescence() const { return fluorescence_; }
+
 private:
+    struct PathState;
+    PathRadiance trace(PathState& state, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;
+    // Radiance re-emitted at p towards the path, at the camera wavelengths, for a branch whose
+    // source-term estimate is multiplied by `weight` (throughput over branch pdf, MIS-normalized).
+    SampledSpectrum fluorescence(const Vec3& p, int medium, const SampledWavelengths& wl, const SampledSpectrum& weight, Rng& rng,
+                                 PathStats& stats, int generation, int depth) const;
     int mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const Vec3& dir, int current) const;
 
     const Scene& scene_;
     LightSampler lights_;
+    FluorescencePlan fluorescence_;
 };
 
 }  // namespace fluorosim

@@ -7,7 +7,6 @@
 
 #include "core/errors.h"
 #include "core/parallel.h"
-#include "spectral/wavelength_sampler.h"
 
 namespace fluorosim {
 
@@ -28,20 +27,7 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
     options.validate();
     const auto start = std::chrono::steady_clock::now();
     const PathTracer tracer(scene);
-    std::vector<double> lines;
-    bool continuous = false;
-    for (const Light& light : scene.lights) {
-        const Spectrum& s = std::visit(
-            [](const auto& l) -> const Spectrum& {
-                using T = std::decay_t<decltype(l)>;
-                if constexpr (std::is_same_v<T, AreaLight>) return l.emission.radiance;
-                else return l.intensity;
-            },
-            light);
-        for (const SpectralLine& line : s.spectralLines()) lines.push_back(line.lambdaNm);
-        continuous = continuous || s.hasContinuousPart();
-    }
-    const WavelengthSampler wavelengths(scene.spectral.lambdaMin, scene.spectral.lambdaMax, lines, continuous);
+    const WavelengthSampler wavelengths = cameraWavelengthSampler(scene, tracer.fluorescence().active());
 
     const Camera& cam = scene.camera;
     const int rows = cam.height;
@@ -66,8 +52,7 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
                     Rng rng = Rng::forKey(options.seed, pixel, static_cast<uint64_t>(s));
                     const SampledWavelengths wl = wavelengths.sample(rng.uniform(), rng.uniform());
                     const Ray ray = cameraRay(cam, x, y, rng.uniform(), rng.uniform());
-                    const SampledSpectrum L = tracer.radiance(ray, cam.medium, wl, rng, stats);
-                    film.addSample(x, y, L, wl);
+                    film.addSample(x, y, tracer.radiance(ray, cam.medium, wl, rng, stats), wl);
                 }
             }
             if (options.progress) {

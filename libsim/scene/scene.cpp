@@ -4,6 +4,22 @@
 
 namespace fluorosim {
 
+std::optional<FluorescenceModel> fluorescenceModelFromName(const std::string& name) {
+    if (name == "full") return FluorescenceModel::Full;
+    if (name == "paper") return FluorescenceModel::Paper;
+    if (name == "none") return FluorescenceModel::None;
+    return std::nullopt;
+}
+
+const char* fluorescenceModelName(FluorescenceModel model) {
+    switch (model) {
+        case FluorescenceModel::Full: return "full";
+        case FluorescenceModel::Paper: return "paper";
+        case FluorescenceModel::None: return "none";
+    }
+    return "full";
+}
+
 void Scene::addAreaLight(uint32_t shape, AreaEmission emission) {
     AreaLight light{shape, std::move(emission), {}};
     if (!geometry.isSphere(shape)) {

@@ -2,6 +2,7 @@
 // The in-memory scene: geometry, what each shape is (material, media on each side, emission),
 // lights, camera and the sampled wavelength range. Built by scene_loader or directly in code.
 #include <memory>
+#include <optional>
 #include <string>
 #include <variant>
 #include <vector>
@@ -58,7 +59,16 @@ struct SpectralSettings {
     double binWidth = 10;                     // nm, spectral EXR channels
 };
 
+// How dyes re-emit. Full: the unbiased model (any number of fluorescence generations, multiple
+// scattering at every wavelength). Paper: Abdellah et al.'s model (one fluorescence event, lit
+// directly from the lights through transmittance). None: dyes only absorb.
+enum class FluorescenceModel { Full, Paper, None };
+// "full", "paper" or "none"; nullopt for anything else.
+std::optional<FluorescenceModel> fluorescenceModelFromName(const std::string& name);
+const char* fluorescenceModelName(FluorescenceModel model);
+
 struct RenderSettings {
+    FluorescenceModel fluorescence = FluorescenceModel::Full;
     int spp = 16;
     int maxDepth = 100000;  // a safety cap; paths that hit it are counted, never silently
     uint64_t seed = 1;

@@ -182,7 +182,12 @@ private:
     }
 
     void loadRender(const Node& n, Scene& scene) {
-        n.allowOnly({"spp", "max_depth", "seed"});
+        n.allowOnly({"spp", "max_depth", "seed", "fluorescence"});
+        if (n.has("fluorescence")) {
+            const auto model = fluorescenceModelFromName(n.at("fluorescence").str());
+            if (!model) n.at("fluorescence").fail("expected \"full\", \"paper\" or \"none\"");
+            scene.render.fluorescence = *model;
+        }
         if (n.has("spp")) scene.render.spp = n.at("spp").integer(1, 1 << 24);
         if (n.has("max_depth")) scene.render.maxDepth = n.at("max_depth").integer(1, 100000000);
         if (n.has("seed")) scene.render.seed = static_cast<uint64_t>(n.at("seed").integer(0, 2147483647));
@@ -303,14 +308,14 @@ private:
             const double g = m.has("g") ? m.at("g").number(-1, 1, true, true) : 0.0;
             const double ior = m.has("ior") ? m.at("ior").number(1, 10) : 1.0;
             std::vector<DyeComponent> dyes;
-            if (m.has("dyes")) dyes = loadDyes(m.at("dyes"), it.key(), scene);
+            if (m.has("dyes")) dyes = loadDyes(m.at("dyes"));
             mediumIndex_[it.key()] = static_cast<int>(scene.media.size());
             scene.media.emplace_back(it.key(), sa, ss, g, ior, std::move(dyes));
         }
     }
 
     // [{"dye": "AF488", "concentration": "10 uM"}, {"dye": "...", "concentration": "0.1 g/L", "molar_mass": "643.4 g/mol"}]
-    std::vector<DyeComponent> loadDyes(const Node& n, const std::string& medium, Scene& scene) {
+    std::vector<DyeComponent> loadDyes(const Node& n) {
         if (!n.raw().is_array()) n.fail("expected an array of dyes");
         if (!dyes_) n.fail("no dye database is available to this loader");
         std::vector<DyeComponent> out;
@@ -330,9 +335,6 @@ private:
             }
             out.push_back({*dye, concentration(d)});
         }
-        if (!out.empty())
-            scene.warnings.push_back("medium \"" + medium + "\" holds dyes: this build simulates their absorption only; fluorescent "
-                                     "re-emission is not simulated yet");
         return out;
     }
 

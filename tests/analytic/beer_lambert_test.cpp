@@ -42,7 +42,7 @@ TEST(BeerLambert, PathTracedRadianceThroughAbsorber) {
     const auto [mean, se] = testing::meanOf(200000, [&](int i) {
         Rng rng = Rng::forKey(5, static_cast<uint64_t>(i), 1);
         const SampledWavelengths wl = SampledWavelengths::sampleUniform(rng.uniform(), 400, 700);
-        return tracer.radiance(Ray{Vec3(0, 0, -5), Vec3(0, 0, 1)}, kNone, wl, rng, stats).average();
+        return tracer.radiance(Ray{Vec3(0, 0, -5), Vec3(0, 0, 1)}, kNone, wl, rng, stats).total().average();
     });
     EXPECT_NEAR(mean, Le * std::exp(-0.5 * 2.0), 4 * se) << "se " << se;
     EXPECT_LT(se, 0.01);

@@ -86,7 +86,7 @@ TEST(Lights, SphereLightOverLambertianPlane) {
     const auto [mean, se] = testing::meanOf(100000, [&](int i) {
         Rng rng = Rng::forKey(8, static_cast<uint64_t>(i), 2);
         const SampledWavelengths wl = SampledWavelengths::sampleUniform(rng.uniform(), 400, 700);
-        return tracer.radiance(Ray{Vec3(0, 0.2, 0), Vec3(0, -1, 0)}, kNone, wl, rng, stats).average();
+        return tracer.radiance(Ray{Vec3(0, 0.2, 0), Vec3(0, -1, 0)}, kNone, wl, rng, stats).total().average();
     });
     EXPECT_NEAR(mean, kRho * L * (r / D) * (r / D), 4 * se) << "stderr " << se;
     EXPECT_LT(se, 0.01 * mean);

@@ -36,7 +36,7 @@ TEST(ReviewRegressions, ConductorWithZeroIndexIsFinite) {
 TEST(ReviewRegressions, LineAtRangeMaximumLandsInLastBin) {
     const TabulatedSpectrum one({360, 830}, {1, 1});
     Film film(1, 1, 400, 700, 50, {one, one, one});
-    film.addSample(0, 0, SampledSpectrum(2.0), SampledWavelengths::atLine(700.0, 1.0));
+    film.addSample(0, 0, PathRadiance{SampledSpectrum(2.0), SampledSpectrum(0.0)}, SampledWavelengths::atLine(700.0, 1.0));
     const ExrImage img = film.image(1);
     const auto& v = img.spectral[0].values;
     EXPECT_NEAR(v.back() * 50.0, 2.0, 2e-7);  // per nm times the bin width = the line's value (stored as float)
@@ -58,7 +58,7 @@ TEST(ReviewRegressions, TinyBeadFarFromOriginIsCrossedExactly) {
     PathStats stats;
     const auto [mean, se] = testing::meanOf(20000, [&](int i) {
         Rng rng = Rng::forKey(3, static_cast<uint64_t>(i), 0);
-        return tracer.radiance(Ray{Vec3(100, 0, -1), Vec3(0, 0, 1)}, kNone, wl, rng, stats).average();
+        return tracer.radiance(Ray{Vec3(100, 0, -1), Vec3(0, 0, 1)}, kNone, wl, rng, stats).total().average();
     });
     EXPECT_NEAR(mean, std::exp(-0.4), 4 * se + 1e-12);
 }

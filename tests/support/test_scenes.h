@@ -71,7 +71,7 @@ inline Estimate meanRadiance(const Scene& scene, const Vec3& origin, int originM
         do p = Vec3(2 * rng.uniform() - 1, 2 * rng.uniform() - 1, 2 * rng.uniform() - 1);
         while (dot(p, p) > 1);
         const Vec3 dir = normalize(target + p * targetRadius - origin);
-        return tracer.radiance(Ray{origin, dir}, originMedium, wl, rng, stats).average();
+        return tracer.radiance(Ray{origin, dir}, originMedium, wl, rng, stats).total().average();
     });
 }
 

@@ -483,8 +483,18 @@ TEST(SceneLoaderDyes, MolarAndMassConcentrations) {
     EXPECT_EQ(dyes[0].dye.id(), "alexa_fluor_488");
     EXPECT_DOUBLE_EQ(dyes[0].molar, 1e-5);
     EXPECT_DOUBLE_EQ(dyes[1].molar, 0.5 / 791.8);
-    ASSERT_EQ(scene.warnings.size(), 1u);
-    EXPECT_TRUE(contains(scene.warnings[0], "re-emission is not simulated")) << scene.warnings[0];
+    EXPECT_TRUE(scene.warnings.empty());
+    EXPECT_EQ(scene.render.fluorescence, FluorescenceModel::Full);
+}
+
+TEST(SceneLoaderDyes, FluorescenceModelIsSelectable) {
+    json j = minimalScene();
+    j["render"]["fluorescence"] = "paper";
+    EXPECT_EQ(load(j).render.fluorescence, FluorescenceModel::Paper);
+    j["render"]["fluorescence"] = "none";
+    EXPECT_EQ(load(j).render.fluorescence, FluorescenceModel::None);
+    j["render"]["fluorescence"] = "unbiased";
+    expectRejected(j, {"/render/fluorescence", "\"full\", \"paper\" or \"none\"", "\"unbiased\""});
 }
 
 TEST(SceneLoaderDyes, BadDyeInput) {

@@ -1,0 +1,131 @@
+#include "render/fluorescence.h"
+
+#include <algorithm>
+#include <limits>
+
+
+namespace fluorosim {
+namespace {
+
+// Branch points per unit of the dye's own emission strength. Any value is unbiased; larger values
+// trade more (rouletted) sub-paths for less variance. On the forward-comparison balls, 16 instead of
+// 1 cut the standard error about 3x at about the same run time; 8 keeps dense media cheaper.
+constexpr double kBranchBoost = 8.0;
+
+const Spectrum& emissionSpectrum(const Light& light) {
+    return std::visit(
+        [](const auto& l) -> const Spectrum& {
+            using T = std::decay_t<decltype(l)>;
+            if constexpr (std::is_same_v<T, AreaLight>) return l.emission.radiance;
+            else return l.intensity;
+        },
+        light);
+}
+
+struct LightSpectra {
+    std::vector<double> lines;
+    bool continuous = false;
+};
+
+LightSpectra lightSpectra(const Scene& scene) {
+    LightSpectra out;
+    for (const Light& light : scene.lights) {
+        const Spectrum& s = emissionSpectrum(light);
+        for (const SpectralLine& line : s.spectralLines()) out.lines.push_back(line.lambdaNm);
+        out.continuous = out.continuous || s.hasContinuousPart();
+    }
+    return out;
+}
+
+bool canEmit(const DyeComponent& d) { return d.molar > 0 && d.dye.quantumYield() > 0; }
+
+struct Interval {
+    double lo = std::numeric_limits<double>::infinity(), hi = -std::numeric_limits<double>::infinity();
+    void add(std::pair<double, double> s) {
+        lo = std::min(lo, s.first);
+        hi = std::max(hi, s.second);
+    }
+    Interval clipped(double a, double b) const { return {std::max(lo, a), std::min(hi, b)}; }
+    bool empty() const { return !(hi > lo); }
+    bool overlaps(std::pair<double, double> s) const { return std::min(hi, s.second) > std::max(lo, s.first); }
+};
+
+// Hulls of the absorption and emission bands of every dye that can emit.
+struct DyeBands {
+    Interval absorption, emission;
+    std::vector<std::pair<double, double>> absorptionBands, emissionBands;
+    std::vector<const Fluorophore*> dyes;
+};
+
+DyeBands dyeBands(const Scene& scene) {
+    DyeBands b;
+    for (const HomogeneousMedium& m : scene.media)
+        for (const DyeComponent& d : m.dyes()) {
+            if (!canEmit(d)) continue;
+            b.absorption.add(d.dye.excitationSupport());
+            b.emission.add(d.dye.emissionSupport());
+            b.absorptionBands.push_back(d.dye.excitationSupport());
+            b.emissionBands.push_back(d.dye.emissionSupport());
+            b.dyes.push_back(&d.dye);
+        }
+    return b;
+}
+
+WavelengthSampler makeExcitationSampler(const Scene& scene, bool& possible) {
+    const LightSpectra lights = lightSpectra(scene);
+    const DyeBands bands = dyeBands(scene);
+    std::vector<double> lines;
+    for (double l : lights.lines)
+        if (std::any_of(bands.dyes.begin(), bands.dyes.end(), [&](const Fluorophore* f) { return f->molarExtinction(l) > 0; }))
+            lines.push_back(l);
+    bool reabsorption = false;
+    for (const auto& em : bands.emissionBands)
+        for (const auto& ab : bands.absorptionBands) reabsorption = reabsorption || Interval{ab.first, ab.second}.overlaps(em);
+    const Interval range = bands.absorption.clipped(scene.spectral.lambdaMin, scene.spectral.lambdaMax);
+    const bool continuous = (lights.continuous || reabsorption) && !range.empty();
+    possible = continuous || !lines.empty();
+    if (!possible) return WavelengthSampler(scene.spectral.lambdaMin, scene.spectral.lambdaMax, {}, false);
+    if (!continuous) return WavelengthSampler(scene.spectral.lambdaMin, scene.spectral.lambdaMax, lines, false);
+    return WavelengthSampler(range.lo, range.hi, lines, true);
+}
+
+}  // namespace
+
+WavelengthSampler cameraWavelengthSampler(const Scene& scene, bool fluorescenceActive) {
+    const LightSpectra lights = lightSpectra(scene);
+    const double lo = scene.spectral.lambdaMin, hi = scene.spectral.lambdaMax;
+    if (lights.continuous || !fluorescenceActive) return WavelengthSampler(lo, hi, lights.lines, lights.continuous);
+    const Interval emission = dyeBands(scene).emission.clipped(lo, hi);
+    if (emission.empty()) return WavelengthSampler(lo, hi, lights.lines, false);
+    return WavelengthSampler(emission.lo, emission.hi, lights.lines, true);
+}
+
+FluorescencePlan::FluorescencePlan(const Scene& scene)
+    : model_(scene.render.fluorescence), excitation_(makeExcitationSampler(scene, active_)) {
+    if (model_ == FluorescenceModel::None) active_ = false;
+    media_.resize(scene.media.size());
+    bool anyDye = false;
+    for (size_t m = 0; m < scene.media.size(); ++m)
+        for (const DyeComponent& d : scene.media[m].dyes()) {
+            if (!canEmit(d)) continue;
+            const double weight = kBranchBoost * d.dye.quantumYield() * dyePeakAbsorption(d.dye, d.molar) / d.dye.emissionPdfMax();
+            media_[m].dyes.push_back({&d.dye, d.molar, weight});
+            anyDye = true;
+        }
+    active_ = active_ && anyDye;
+}
+
+double FluorescencePlan::branchDensity(int medium, double lambda) const {
+    double sum = 0;
+    for (const DyeTerm& t : media_[static_cast<size_t>(medium)].dyes) sum += t.branchWeight * t.dye->emissionPdf(lambda);
+    return sum;
+}
+
+double FluorescencePlan::kernel(int medium, double lambdaExcitation, double lambda) const {
+    double sum = 0;
+    for (const DyeTerm& t : media_[static_cast<size_t>(medium)].dyes)
+        sum += t.dye->quantumYield() * t.dye->emissionPdf(lambda) * dyeAbsorption(*t.dye, lambdaExcitation, t.molar);
+    return sum * lambdaExcitation / lambda;
+}
+
+}  // namespace fluorosim

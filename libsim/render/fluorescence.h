@@ -1,0 +1,59 @@
+#pragma once
+// What the fluorescence estimator needs from a scene, computed once: which wavelengths camera paths
+// and excitation sub-paths must carry, how often a camera path branches into an excitation sub-path,
+// and the inelastic kernel. The derivation is in docs/model.md ("Fluorescence estimator").
+#include <vector>
+
+#include "scene/scene.h"
+#include "spectral/wavelength_sampler.h"
+
+namespace fluorosim {
+
+// Camera wavelengths: the lights' lines (elastic light seen directly) plus a continuous part. The
+// continuous part spans the spectral range when some light is continuous; when every light is a
+// line it spans only where the scene's dyes emit (nothing else can arrive at other wavelengths).
+WavelengthSampler cameraWavelengthSampler(const Scene& scene, bool fluorescenceActive);
+
+class FluorescencePlan {
+public:
+    explicit FluorescencePlan(const Scene& scene);
+
+    // False when the model is None or no medium holds a dye that can emit (zero concentration, Φ = 0,
+    // or no light and no other dye's emission inside the dye's absorption band).
+    bool active() const { return active_; }
+    bool active(int medium) const { return active_ && medium >= 0 && !media_[static_cast<size_t>(medium)].dyes.empty(); }
+    FluorescenceModel model() const { return model_; }
+
+    // Density (1/mm) of fluorescence branch points along a camera path at `lambda`: Σ_i Φ_i σa,i(peak)
+    // f_i(λ)/max f_i. Added to the free-flight majorant as null density, and every tentative collision
+    // branches with probability branchDensity/majorant, so the source term is sampled even where the
+    // dye does not absorb at the camera's wavelength. Any positive choice is unbiased; this one follows
+    // the emission shape and the dye's strength.
+    double branchDensity(int medium, double lambda) const;
+
+    // Inelastic kernel in radiance units (1/(mm nm)): Σ_i Φ_i f_i(λ) σa,i(λx) λx/λ. The factor λx/λ
+    // turns photons counted by Φ into energy.
+    double kernel(int medium, double lambdaExcitation, double lambda) const;
+
+    // Excitation wavelengths of a sub-path: the lights' lines that some dye absorbs, plus a continuous
+    // part over the dyes' absorption bands when a light is continuous or when one dye's emission can
+    // be re-absorbed (secondary fluorescence).
+    SampledWavelengths sampleExcitation(double uBranch, double u) const { return excitation_.sample(uBranch, u); }
+    const WavelengthSampler& excitationSampler() const { return excitation_; }
+
+private:
+    struct DyeTerm {
+        const Fluorophore* dye;
+        double molar;
+        double branchWeight;        // Φ σa(peak) / max f
+    };
+    struct MediumTerms {
+        std::vector<DyeTerm> dyes;  // only dyes that can emit
+    };
+    FluorescenceModel model_;
+    bool active_ = false;
+    std::vector<MediumTerms> media_;
+    WavelengthSampler excitation_;
+};
+
+}  // namespace fluorosim

@@ -1,0 +1,202 @@
+#include "render/photon_tracer.h"
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+#include "core/errors.h"
+#include "core/math.h"
+#include "core/parallel.h"
+#include "core/rng.h"
+#include "core/sampling.h"
+#include "materials/fresnel.h"
+
+namespace fluorosim {
+namespace {
+
+struct Tallies {
+    Accumulator power, powerLambda, absorbed;
+    std::vector<Accumulator> bins;
+};
+
+struct Photon {
+    Ray ray;
+    int medium = kNone;
+    double lambda = 0;
+    double weight = 0;  // watts carried
+    bool fluorescent = false;
+};
+
+double lightSpectrumSample(const Spectrum& s, double lambdaMin, double lambdaMax, Rng& rng, double* lambda) {
+    const auto& lines = s.spectralLines();
+    const bool continuous = s.hasContinuousPart();
+    const double pLine = lines.empty() ? 0.0 : (continuous ? 0.5 : 1.0);
+    if (rng.uniform() < pLine) {
+        const size_t i = std::min(lines.size() - 1, static_cast<size_t>(rng.uniform() * static_cast<double>(lines.size())));
+        *lambda = lines[i].lambdaNm;
+        return lines[i].power * static_cast<double>(lines.size()) / pLine;
+    }
+    *lambda = lambdaMin + rng.uniform() * (lambdaMax - lambdaMin);
+    return s(*lambda) * (lambdaMax - lambdaMin) / (1.0 - pLine);
+}
+
+class ForwardTracer {
+public:
+    ForwardTracer(const Scene& scene, const ForwardPhotonOptions& o) : scene_(scene), o_(o) {
+        for (const Light& l : scene.lights) {
+            if (!std::holds_alternative<PointLight>(l)) throw ConfigError("the forward photon tracer supports point lights only");
+            points_.push_back(&std::get<PointLight>(l));
+        }
+        if (points_.empty()) throw ConfigError("the forward photon tracer needs at least one point light");
+    }
+
+    void tracePhoton(Rng& rng, Tallies& t) const {
+        const PointLight& light = *points_[std::min(points_.size() - 1, static_cast<size_t>(rng.uniform() * static_cast<double>(points_.size())))];
+        Photon ph;
+        ph.weight = static_cast<double>(points_.size()) *
+                    lightSpectrumSample(light.intensity, scene_.spectral.lambdaMin, scene_.spectral.lambdaMax, rng, &ph.lambda);
+        const Vec3 toAim = o_.aimCenter - light.position;
+        const double dist = length(toAim);
+        if (!(dist > o_.aimRadius)) throw ConfigError("a point light lies inside the aim ball of the forward photon tracer");
+        const double sinMax = o_.aimRadius / dist, cosMax = std::sqrt(std::max(0.0, 1 - sinMax * sinMax));
+        const double cosT = 1 - rng.uniform() * (1 - cosMax), phi = 2 * kPi * rng.uniform();
+        const double sinT = std::sqrt(std::max(0.0, 1 - cosT * cosT));
+        const Frame f = Frame::fromNormal(toAim / dist);
+        ph.ray = Ray{light.position, f.toWorld(Vec3(sinT * std::cos(phi), sinT * std::sin(phi), cosT))};
+        ph.weight *= 2 * kPi * (1 - cosMax);
+        ph.medium = kNone;  // point lights must lie outside every medium
+        if (ph.weight == 0) return;
+        bool absorbedOnce = false;
+        for (int events = 0; events < 100000000; ++events) {
+            const auto hit = scene_.geometry.intersect(ph.ray, 0.0, std::numeric_limits<double>::infinity());
+            if (ph.medium != kNone) {
+                const HomogeneousMedium& m = scene_.media[static_cast<size_t>(ph.medium)];
+                const double sa = m.absorptionAt(ph.lambda), ss = m.scatteringAt(ph.lambda);
+                const double st = sa + ss;
+                const double s = st > 0 ? -std::log(1 - rng.uniform()) / st : std::numeric_limits<double>::infinity();
+                if (!hit || s < hit->t) {
+                    if (!hit && !std::isfinite(s)) return;  // lost in an unbounded clear medium
+                    const Vec3 p = ph.ray.at(s);
+                    if (rng.uniform() * st < ss) {
+                        double pdf = 0;
+                        ph.ray = Ray{p, m.phase().sample(ph.ray.d, rng.uniform(), rng.uniform(), &pdf)};
+                        continue;
+                    }
+                    // Absorbed: by which dye, if any?
+                    double u = rng.uniform() * sa;
+                    const Fluorophore* dye = nullptr;
+                    for (const DyeComponent& d : m.dyes()) {
+                        const double a = dyeAbsorption(d.dye, ph.lambda, d.molar);
+                        if (u < a) {
+                            dye = &d.dye;
+                            break;
+                        }
+                        u -= a;
+                    }
+                    if (!dye) return;  // solvent absorption
+                    if (!absorbedOnce && !ph.fluorescent) t.absorbed.add(ph.weight);
+                    absorbedOnce = true;
+                    if (rng.uniform() >= dye->quantumYield()) return;
+                    const auto [lo, hi] = dye->emissionSupport();
+                    const double lambdaNew = lo + rng.uniform() * (hi - lo);
+                    ph.weight *= dye->emissionPdf(lambdaNew) * (hi - lo) * ph.lambda / lambdaNew;
+                    ph.lambda = lambdaNew;
+                    ph.fluorescent = true;
+                    ph.ray = Ray{p, sampleUniformSphere(rng.uniform(), rng.uniform())};
+                    if (ph.weight == 0) return;
+                    continue;
+                }
+            }
+            if (!hit) {
+                if (ph.fluorescent) {
+                    t.power.add(ph.weight);
+                    t.powerLambda.add(ph.weight * ph.lambda);
+                    for (size_t b = 0; b + 1 < o_.binEdgesNm.size(); ++b)
+                        if (ph.lambda >= o_.binEdgesNm[b] && ph.lambda < o_.binEdgesNm[b + 1]) t.bins[b].add(ph.weight);
+                }
+                return;
+            }
+            const ShapeInfo& shape = scene_.shapes[hit->shape];
+            if (!shape.isInterface) return;  // opaque surfaces and emitters absorb
+            const bool entering = dot(ph.ray.d, hit->n) < 0;
+            const int next = entering ? shape.insideMedium : shape.outsideMedium;
+            Vec3 dir = ph.ray.d;
+            if (shape.material != kNone) {
+                const Material& mat = *scene_.materials[static_cast<size_t>(shape.material)];
+                if (!(mat.isSpecular() && mat.isTransmissive())) return;  // only smooth dielectrics are modelled
+                const double n1 = scene_.ior(ph.medium), n2 = scene_.ior(next);
+                const Vec3 nFacing = entering ? hit->n : -hit->n;  // on the incident side
+                const double cosI = -dot(ph.ray.d, nFacing);
+                const double R = fresnelDielectric(cosI, n2 / n1);
+                Vec3 wt;
+                if (rng.uniform() < R || !refract(-ph.ray.d, nFacing, n2 / n1, &wt)) {
+                    dir = ph.ray.d + nFacing * (2 * cosI);
+                    ph.ray = Ray{hit->p + nFacing * hit->epsilon, normalize(dir)};
+                    continue;
+                }
+                dir = wt;
+            }
+            ph.medium = next;
+            ph.ray = Ray{hit->p + hit->n * (dot(hit->n, dir) > 0 ? hit->epsilon : -hit->epsilon), dir};
+        }
+    }
+
+private:
+    const Scene& scene_;
+    const ForwardPhotonOptions& o_;
+    std::vector<const PointLight*> points_;
+};
+
+}  // namespace
+
+void ForwardPhotonOptions::validate() const {
+    if (photons == 0 || photons > (uint64_t(1) << 40)) throw ConfigError("photon count must lie in [1, 2^40], got " + std::to_string(photons));
+    if (!(aimRadius > 0) || !std::isfinite(aimRadius)) throw ConfigError("aim radius must be positive, got " + std::to_string(aimRadius));
+    for (size_t i = 1; i < binEdgesNm.size(); ++i)
+        if (!(binEdgesNm[i] > binEdgesNm[i - 1])) throw ConfigError("spectral bin edges must increase");
+}
+
+ForwardPhotonResult traceForwardPhotons(const Scene& scene, const ForwardPhotonOptions& options) {
+    options.validate();
+    const auto start = std::chrono::steady_clock::now();
+    const ForwardTracer tracer(scene, options);
+    constexpr uint64_t kBatch = 4096;
+    const uint64_t batches = (options.photons + kBatch - 1) / kBatch;
+    std::vector<Tallies> perBatch(batches);
+    parallelFor(batches, options.threads, [&](size_t b) {
+        Tallies& t = perBatch[b];
+        t.bins.resize(options.binEdgesNm.empty() ? 0 : options.binEdgesNm.size() - 1);
+        const uint64_t end = std::min(options.photons, (b + 1) * kBatch);
+        for (uint64_t i = b * kBatch; i < end; ++i) {
+            Rng rng = Rng::forKey(options.seed, i, 0x70686f74);
+            // Every photon adds exactly once to each accumulator (zeros included) so that the
+            // per-photon variance is right.
+            Tallies one;
+            one.bins.resize(t.bins.size());
+            tracer.tracePhoton(rng, one);
+            t.power.add(one.power.sum);
+            t.powerLambda.add(one.powerLambda.sum);
+            t.absorbed.add(one.absorbed.sum);
+            for (size_t k = 0; k < t.bins.size(); ++k) t.bins[k].add(one.bins[k].sum);
+        }
+    });
+    Tallies total;
+    total.bins.resize(perBatch.empty() ? 0 : perBatch[0].bins.size());
+    for (const Tallies& t : perBatch) {
+        total.power.merge(t.power);
+        total.powerLambda.merge(t.powerLambda);
+        total.absorbed.merge(t.absorbed);
+        for (size_t k = 0; k < total.bins.size(); ++k) total.bins[k].merge(t.bins[k]);
+    }
+    const double n = static_cast<double>(options.photons);
+    ForwardPhotonResult r;
+    r.fluorescentPower = total.power.value(n);
+    r.fluorescentPowerTimesLambda = total.powerLambda.value(n);
+    r.absorbedPower = total.absorbed.value(n);
+    for (const Accumulator& a : total.bins) r.binPower.push_back(a.value(n));
+    r.photons = options.photons;
+    r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return r;
+}
+
+}  // namespace fluorosim
