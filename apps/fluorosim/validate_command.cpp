@@ -108,6 +108,7 @@ void addValidateCommands(CLI::App& app) {
     slab->add_option("--threads", a->threads, "Threads (0 = all cores)");
     slab->add_flag("--quiet", a->quiet, "No progress bar");
     slab->callback([a] { runSlab(*a); });
+    addFluorescenceValidations(*validate);
 }
 
 }  // namespace fluorosim::app

@@ -1,6 +1,7 @@
 #include "render/fluorescence.h"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 
 
@@ -97,7 +98,29 @@ WavelengthSampler cameraWavelengthSampler(const Scene& scene, bool fluorescenceA
     if (lights.continuous || !fluorescenceActive) return WavelengthSampler(lo, hi, lights.lines, lights.continuous);
     const Interval emission = dyeBands(scene).emission.clipped(lo, hi);
     if (emission.empty()) return WavelengthSampler(lo, hi, lights.lines, false);
-    return WavelengthSampler(emission.lo, emission.hi, lights.lines, true);
+    WavelengthSampler sampler(emission.lo, emission.hi, lights.lines, true);
+    // Camera wavelengths follow the dyes' emission (each dye weighted by its branch strength), mixed
+    // with 20 % uniform so that every wavelength where something could arrive keeps a density.
+    const int cells = std::max(1, static_cast<int>(std::ceil(emission.hi - emission.lo)));
+    std::vector<double> density(static_cast<size_t>(cells), 0.0);
+    const double width = (emission.hi - emission.lo) / cells;
+    double total = 0;
+    for (const HomogeneousMedium& m : scene.media)
+        for (const DyeComponent& d : m.dyes()) {
+            if (!canEmit(d)) continue;
+            const double w = d.dye.quantumYield() * dyePeakAbsorption(d.dye, d.molar);
+            for (int c = 0; c < cells; ++c) {
+                const double a = emission.lo + c * width;
+                const double v = w * d.dye.emission().integral(a, a + width);
+                density[static_cast<size_t>(c)] += v;
+                total += v;
+            }
+        }
+    if (total > 0) {
+        for (double& v : density) v = 0.8 * v / total + 0.2 / cells;
+        sampler.setContinuousDensity(std::move(density));
+    }
+    return sampler;
 }
 
 FluorescencePlan::FluorescencePlan(const Scene& scene)

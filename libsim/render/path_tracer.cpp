@@ -108,7 +108,7 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const Sample
     // Roulette on the branch's throughput keeps the number of sub-paths proportional to the energy
     // they carry, so re-absorption cascades (continuous to continuous wavelengths) stay subcritical
     // however often paths branch. At a line the throughput is per nm of camera bandwidth, not a
-    // fraction, so line branches are always traced; they cannot cascade among themselves.
+    // fraction, so line branches are always traced; a path at a line never branches again.
     const double a = start.maxComponent();
     if (!(a > 0)) return SampledSpectrum(0.0);
     double survival = 1.0;
@@ -217,7 +217,10 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             const MediumSample mp = med.coefficients(wl);
             // Fluorescence branch points are extra null density, so the source term is sampled even
             // where the dye barely absorbs at these wavelengths.
-            const bool dyed = fluorescence_.active(medium);
+            // A path at a spectral line estimates the line's delta weight. Re-emitted light is a
+            // continuous density and adds nothing to it (the continuous wavelength branch covers it
+            // at that wavelength), so such paths never branch; this also ends every cascade there.
+            const bool dyed = !wl.discrete && fluorescence_.active(medium);
             SampledSpectrum sigmaB(0.0);
             if (dyed)
                 for (int j = 0; j < kNumWavelengths; ++j) sigmaB[j] = fluorescence_.branchDensity(medium, wl.lambda[j]);
