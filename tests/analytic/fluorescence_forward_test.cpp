@@ -106,5 +106,18 @@ TEST(FluorescenceForward, OpticallyThickBallWithReabsorption) {
     expectAgreement(compare(scene, 1.0, 60000, 200000, bins), bins);
 }
 
+// Lights inside the dyes' emission bands (561 nm excites AF546 and lies where both dyes emit): paths
+// at a spectral line must not branch (re-emission is a density, not part of the line's delta weight).
+// Before that rule this scene hung in line-to-line cascades and over-counted.
+TEST(FluorescenceForward, LightInsideEmissionBands) {
+    Scene scene = baseScene();
+    const int m = addDyedMedium(scene, "overlap", 0.0, 2.0, 0.0, 1.0, {{databaseDye("AF488"), 2e-5}, {databaseDye("AF546"), 2e-5}});
+    addDyedBall(scene, 1.0, m, false);
+    addPointLight(scene, Vec3(0, 0, 5), Spectrum::lines({{499, 1.0}, {561, 1.0}}));
+    scene.finalize();
+    const std::vector<double> bins{450, 540, 580, 750};
+    expectAgreement(compare(scene, 1.0, 60000, 600000, bins), bins);
+}
+
 }  // namespace
 }  // namespace fluorosim
