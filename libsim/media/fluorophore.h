@@ -32,6 +32,8 @@ public:
     // Smallest intervals outside which the spectra are exactly zero (nm).
     std::pair<double, double> excitationSupport() const { return excitationSupport_; }
     std::pair<double, double> emissionSupport() const { return emissionSupport_; }
+    // Wavelengths the excitation table covers (it is 0 outside, by assumption rather than by data).
+    std::pair<double, double> excitationTableRange() const { return {excitation_.minLambda(), excitation_.maxLambda()}; }
 
 private:
     std::string id_;

@@ -43,6 +43,8 @@ public:
     const std::vector<DyeComponent>& dyes() const { return dyes_; }
 
     const std::string& name() const { return name_; }
+    const Spectrum& solventAbsorption() const { return sigmaA_; }
+    const Spectrum& scattering() const { return sigmaS_; }
     double ior() const { return ior_; }
     const HenyeyGreenstein& phase() const { return phase_; }
     bool isVacuumLike() const { return vacuum_; }  // no absorption or scattering anywhere

@@ -157,6 +157,7 @@ public:
         loadShapes(r.at("shapes"), scene);
         if (r.has("lights")) loadLights(r.at("lights"), scene);
         if (scene.lights.empty()) r.fail("the scene has no light (add an \"emission\" to a shape or a \"lights\" entry)");
+        checkLinesCovered(scene);
         loadCamera(r.at("camera"), scene);
         scene.warnings.insert(scene.warnings.end(), warnings_.begin(), warnings_.end());
         scene.finalize();
@@ -164,6 +165,37 @@ public:
     }
 
 private:
+    // A light's spectral line outside a medium's tabulated coefficient or a dye's excitation table
+    // would meet a coefficient of 0 by extrapolation, not by data: refuse it.
+    void checkLinesCovered(const Scene& scene) const {
+        std::vector<double> lines;
+        for (const Light& light : scene.lights)
+            std::visit(
+                [&](const auto& l) {
+                    using T = std::decay_t<decltype(l)>;
+                    const Spectrum& s = [&]() -> const Spectrum& {
+                        if constexpr (std::is_same_v<T, AreaLight>) return l.emission.radiance;
+                        else return l.intensity;
+                    }();
+                    for (const SpectralLine& line : s.spectralLines()) lines.push_back(line.lambdaNm);
+                },
+                light);
+        auto check = [&](const std::string& where, std::optional<std::pair<double, double>> range) {
+            if (!range) return;
+            for (double l : lines)
+                if (l < range->first || l > range->second)
+                    throw ConfigError(file_.string() + ": " + where + ": tabulated from " + fmtNm(range->first) + " to " + fmtNm(range->second) +
+                                      " nm, which does not cover the light's spectral line at " + fmtNm(l) + " nm");
+        };
+        for (const HomogeneousMedium& m : scene.media) {
+            check("/media/" + m.name() + "/sigma_a", m.solventAbsorption().tableRange());
+            check("/media/" + m.name() + "/sigma_s", m.scattering().tableRange());
+            for (size_t i = 0; i < m.dyes().size(); ++i)
+                check("/media/" + m.name() + "/dyes/" + std::to_string(i) + " (" + m.dyes()[i].dye.id() + " excitation spectrum)",
+                      m.dyes()[i].dye.excitationTableRange());
+        }
+    }
+
     void loadSpectral(const Node& n, Scene& scene) {
         n.allowOnly({"range", "bin_width"});
         if (n.has("range")) {

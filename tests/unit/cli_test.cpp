@@ -337,3 +337,34 @@ TEST(Cli, NoSubcommandIsAParseError) {
 
 }  // namespace
 }  // namespace fluorosim
+
+namespace fluorosim {
+namespace {
+
+TEST(Cli, ValidateEmissionWritesSpectraAndRejectsBadInput) {
+    const TempDir dir;
+    const fs::path out = dir.path() / "emission.json";
+    const auto r = runCli(dir, {"validate", "emission", "--dye", "AF488", "--excitation", "495", "--spp", "256", "--seed", "3", "-o", out.string()});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    std::ifstream f(out);
+    const json j = json::parse(f);
+    const auto n = j.at("wavelength_nm").size();
+    EXPECT_GT(n, 100u);
+    EXPECT_EQ(j.at("rendered").size(), n);
+    EXPECT_EQ(j.at("reference").size(), n);
+    EXPECT_GT(j.at("pearson").get<double>(), 0.8);  // 256 spp is noisy; docs/validation.md has the full runs
+    EXPECT_NEAR(j.at("reference_peak_nm").get<double>(), 519.5, 1.0);
+
+    const auto unknown = runCli(dir, {"validate", "emission", "--dye", "AF489", "--excitation", "495", "-o", out.string()});
+    EXPECT_EQ(unknown.exitCode, 2);
+    EXPECT_TRUE(contains(unknown.err, "alexa_fluor_488")) << unknown.err;
+    const auto negative = runCli(dir, {"validate", "emission", "--dye", "AF488", "--excitation", "495", "--concentration", "-1uM", "-o", out.string()});
+    EXPECT_EQ(negative.exitCode, 2);
+    EXPECT_TRUE(contains(negative.err, "--concentration")) << negative.err;
+    const auto massNoMolar = runCli(dir, {"validate", "sweep", "--dye", "AF488", "--concentration", "1 g/L", "-o", out.string()});
+    EXPECT_EQ(massNoMolar.exitCode, 2);
+    EXPECT_TRUE(contains(massNoMolar.err, "--concentration")) << massNoMolar.err;
+}
+
+}  // namespace
+}  // namespace fluorosim

@@ -487,6 +487,16 @@ TEST(SceneLoaderDyes, MolarAndMassConcentrations) {
     EXPECT_EQ(scene.render.fluorescence, FluorescenceModel::Full);
 }
 
+// A line outside a medium's coefficient table would meet a 0 made up by extrapolation.
+TEST(SceneLoaderDyes, LightLineOutsideACoefficientTableIsAnError) {
+    json j = minimalScene();
+    j["media"]["water"]["sigma_a"] = {{"unit", "/mm"}, {"tabulated", {{"wavelength_nm", {500, 600}}, {"values", {0.1, 0.2}}}}};
+    j["lights"][0]["intensity"] = {{"lines", {{{"wavelength", "488 nm"}, {"power", 1}}}}};
+    expectRejected(j, {"/media/water/sigma_a", "500 to 600 nm", "488 nm"});
+    j["lights"][0]["intensity"] = {{"lines", {{{"wavelength", "532 nm"}, {"power", 1}}}}};
+    EXPECT_NO_THROW(load(j));
+}
+
 TEST(SceneLoaderDyes, FluorescenceModelIsSelectable) {
     json j = minimalScene();
     j["render"]["fluorescence"] = "paper";
