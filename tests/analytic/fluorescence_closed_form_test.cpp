@@ -148,3 +148,62 @@ TEST(FluorescenceClosedForm, ZeroConcentrationAndZeroYieldGiveExactlyNothing) {
 
 }  // namespace
 }  // namespace fluorosim
+
+namespace fluorosim {
+namespace {
+
+// The paper's concentration series (Alexa Fluor 488 at 0.1, 1 and 10 g/L, lit at 495 nm), on a clear
+// ball of radius 0.2 mm so that the series spans optically thin to thick. Absorption follows
+// Beer–Lambert exactly (closed-form chord integral) and saturates; the fluorescence that escapes is
+// Φ × absorbed × an escape efficiency that falls with concentration (the inner filter: AF488
+// re-absorbs the blue side of its own emission, and each re-emission loses 1 − Φ).
+TEST(FluorescenceClosedForm, Af488ConcentrationSeriesSaturatesAndRollsOff) {
+    const double R = 0.2, D = 5, I = 1, lambdaX = 495;
+    const Fluorophore dye = databaseDye("AF488");
+    const double molarMass = 643.4;  // g/mol, as in samples/fluorescence/af488_series.json
+    std::vector<double> efficiency, efficiencyErr, brightness, brightnessErr;
+    // Dense dye makes branch points dense too (about 2000 per mm at 10 g/L), so fewer paths there.
+    for (const auto& [gramsPerLitre, paths] : {std::pair{0.1, 100000}, std::pair{1.0, 40000}, std::pair{10.0, 12000}}) {
+        const double molar = gramsPerLitre / molarMass;
+        Scene scene;
+        scene.spectral.lambdaMin = 400;
+        scene.spectral.lambdaMax = 750;
+        const int m = addDyedMedium(scene, "af488", 0, 0, 0, 1, {{dye, molar}});
+        addDyedBall(scene, R, m, false);
+        addPointLight(scene, Vec3(0, 0, D), Spectrum::lines({{lambdaX, I}}));
+        scene.finalize();
+        const double sigma = dyeAbsorption(dye, lambdaX, molar);
+        const double thetaMax = std::asin(R / D);
+        double absorbed = 0;
+        const int n = 100000;
+        for (int i = 0; i < n; ++i) {
+            const double t = (i + 0.5) * thetaMax / n;
+            const double chord = 2 * std::sqrt(std::max(0.0, R * R - D * D * sqr(std::sin(t))));
+            absorbed += I * (1 - std::exp(-sigma * chord)) * 2 * kPi * std::sin(t) * thetaMax / n;
+        }
+        const double reaching = I * 2 * kPi * (1 - std::cos(thetaMax));
+        FluxSensorOptions s;
+        s.radius = R * 1.0001;
+        s.paths = static_cast<uint64_t>(paths);
+        s.seed = 31;
+        const FluxSensorResult r = measureExitantFlux(scene, s);
+        const double emittedPhotons = r.fluorescentPowerTimesLambda.mean / lambdaX;  // in units of absorbed watts at λx
+        efficiency.push_back(emittedPhotons / (dye.quantumYield() * absorbed));
+        efficiencyErr.push_back(r.fluorescentPowerTimesLambda.stderr_ / lambdaX / (dye.quantumYield() * absorbed));
+        brightness.push_back(r.fluorescentPower.mean);
+        brightnessErr.push_back(r.fluorescentPower.stderr_);
+        std::printf("  %5.1f g/L: sigma_a(495) = %8.3f /mm, absorbed fraction %.4f, emitted photons / (Φ absorbed) = %.4f +- %.4f, "
+                    "fluorescent power %.4g +- %.2g W\n",
+                    gramsPerLitre, sigma, absorbed / reaching, efficiency.back(), efficiencyErr.back(), brightness.back(), brightnessErr.back());
+        // Re-emission can only lose photons (Φ < 1, and nothing else emits).
+        EXPECT_LT(efficiency.back(), 1.0 + 4 * efficiencyErr.back());
+    }
+    // Rises while absorption is not saturated...
+    EXPECT_GT(brightness[1] - brightness[0], 4 * std::hypot(brightnessErr[0], brightnessErr[1]));
+    // ...then stops rising (saturation) and rolls off a little (inner filter), far below linear growth.
+    EXPECT_LT(brightness[2], brightness[1] + 4 * std::hypot(brightnessErr[1], brightnessErr[2]));
+    EXPECT_LT(brightness[2], 0.2 * 100 * brightness[0]);
+}
+
+}  // namespace
+}  // namespace fluorosim
