@@ -24,8 +24,8 @@ public:
     bool active(int medium) const { return active_ && medium >= 0 && !media_[static_cast<size_t>(medium)].dyes.empty(); }
     FluorescenceModel model() const { return model_; }
 
-    // Density (1/mm) of fluorescence branch points along a camera path at `lambda`: Σ_i Φ_i σa,i(peak)
-    // f_i(λ)/max f_i. Added to the free-flight majorant as null density, and every tentative collision
+    // Density (1/mm) of fluorescence branch points along a camera path at `lambda`: 8 Σ_i σa,i(peak)
+    // f_i(λ)/max f_i (over dyes with Φ > 0). Added to the free-flight majorant as null density, and every tentative collision
     // branches with probability branchDensity/majorant, so the source term is sampled even where the
     // dye does not absorb at the camera's wavelength. Any positive choice is unbiased; this one follows
     // the emission shape and the dye's strength.

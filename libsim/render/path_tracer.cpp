@@ -222,8 +222,11 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             // at that wavelength), so such paths never branch; this also ends every cascade there.
             const bool dyed = !wl.discrete && fluorescence_.active(medium);
             SampledSpectrum sigmaB(0.0);
+            // Capped at max(σt, 1/mm): where the medium is already dense its real collisions are enough,
+            // and a concentrated dye (σa ~ 10^2-10^3 /mm) must not flood the path with branch points.
             if (dyed)
-                for (int j = 0; j < kNumWavelengths; ++j) sigmaB[j] = fluorescence_.branchDensity(medium, wl.lambda[j]);
+                for (int j = 0; j < kNumWavelengths; ++j)
+                    sigmaB[j] = std::min(fluorescence_.branchDensity(medium, wl.lambda[j]), std::max(mp.sigmaA[j] + mp.sigmaS[j], 1.0));
             HomogeneousMajorantIterator<SampledSpectrum> majorants{0.0, tMax, mp.sigmaA + mp.sigmaS + sigmaB};
             const SampledSpectrum T_maj = sampleTmaj<SampledSpectrum>(
                 majorants, rng, [&](double t, const SampledSpectrum& sigmaMaj, const SampledSpectrum& Tm) {

@@ -104,7 +104,7 @@ TEST(FluorescenceClosedForm, AbsorbingBallReemitsEveryAbsorbedPhoton) {
 
     FluxSensorOptions s;
     s.radius = R * 1.0001;
-    s.paths = 100000;
+    s.paths = 400000;
     s.seed = 21;
     const FluxSensorResult back = measureExitantFlux(scene, s);
     // Photons per second are power x wavelength / (h c); compare power x λ.
@@ -162,8 +162,7 @@ TEST(FluorescenceClosedForm, Af488ConcentrationSeriesSaturatesAndRollsOff) {
     const Fluorophore dye = databaseDye("AF488");
     const double molarMass = 643.4;  // g/mol, as in samples/fluorescence/af488_series.json
     std::vector<double> efficiency, efficiencyErr, brightness, brightnessErr;
-    // Dense dye makes branch points dense too (about 2000 per mm at 10 g/L), so fewer paths there.
-    for (const auto& [gramsPerLitre, paths] : {std::pair{0.1, 100000}, std::pair{1.0, 40000}, std::pair{10.0, 12000}}) {
+    for (const auto& [gramsPerLitre, paths] : {std::pair{0.1, 400000}, std::pair{1.0, 400000}, std::pair{10.0, 400000}}) {
         const double molar = gramsPerLitre / molarMass;
         Scene scene;
         scene.spectral.lambdaMin = 400;
