@@ -368,3 +368,54 @@ TEST(Cli, ValidateEmissionWritesSpectraAndRejectsBadInput) {
 
 }  // namespace
 }  // namespace fluorosim
+
+namespace fluorosim {
+namespace {
+
+// A dyed scene's EXR carries elastic and fluorescent layers (RGB and spectral) that add up to the
+// main image; a scene without dyes carries none.
+TEST(Cli, FluorescentSceneWritesElasticAndFluorescentLayers) {
+    const TempDir dir;
+    const auto scene = dir.write("dyed.json", R"({
+      "fluorosim_scene": 1,
+      "spectral": {"range": ["450 nm", "700 nm"], "bin_width": "10 nm"},
+      "camera": {"position": ["0 mm", "0 mm", "-5 mm"], "look_at": ["0 mm", "0 mm", "0 mm"], "up": [0, 1, 0], "fov_y_deg": 30, "resolution": [6, 6]},
+      "media": {"dyed": {"sigma_s": "5 /mm", "dyes": [{"dye": "AF488", "concentration": "50 uM"}]}},
+      "shapes": [{"type": "sphere", "name": "ball", "center": ["0 mm", "0 mm", "0 mm"], "radius": "1 mm", "interior": "dyed"}],
+      "lights": [{"type": "point", "position": ["0 mm", "5 mm", "0 mm"], "intensity": {"lines": [{"wavelength": "488 nm", "power": 1}]}}]
+    })");
+    const fs::path out = dir.path() / "dyed.exr";
+    const auto r = runCli(dir, {"render", scene.string(), "-o", out.string(), "--spp", "16", "--threads", "1"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const ExrChannels e = readExr(out.string());
+    for (const char* c : {"R", "G", "B"}) {
+        ASSERT_TRUE(e.channels.count(std::string("elastic.") + c));
+        ASSERT_TRUE(e.channels.count(std::string("fluorescent.") + c));
+        const auto& total = e.channels.at(c);
+        const auto& el = e.channels.at(std::string("elastic.") + c);
+        const auto& fl = e.channels.at(std::string("fluorescent.") + c);
+        double fluorescentSum = 0;
+        for (size_t i = 0; i < total.size(); ++i) {
+            EXPECT_NEAR(total[i], el[i] + fl[i], 1e-5 * (1 + std::abs(total[i])));
+            fluorescentSum += fl[i];
+        }
+        if (std::string(c) == "G") EXPECT_GT(fluorescentSum, 0.0);  // AF488 emits green
+    }
+    EXPECT_TRUE(e.channels.count("fluorescent.S0.525,000000nm"));
+    EXPECT_TRUE(e.channels.count("elastic.S0.485,000000nm"));
+    const auto summary = json::parse(r.out);
+    EXPECT_EQ(summary.at("fluorescence").get<std::string>(), "full");
+    EXPECT_GT(summary.at("fluorescence_branches").get<uint64_t>(), 0u);
+
+    // --fluorescence none: the dye only absorbs, and no layers are written.
+    const fs::path plain = dir.path() / "plain.exr";
+    const auto n = runCli(dir, {"render", scene.string(), "-o", plain.string(), "--spp", "2", "--threads", "1", "--fluorescence", "none"});
+    ASSERT_EQ(n.exitCode, 0) << n.err;
+    EXPECT_FALSE(readExr(plain.string()).channels.count("fluorescent.R"));
+    const auto bad = runCli(dir, {"render", scene.string(), "-o", plain.string(), "--fluorescence", "unbiased"});
+    EXPECT_EQ(bad.exitCode, 2);
+    EXPECT_TRUE(contains(bad.err, "--fluorescence")) << bad.err;
+}
+
+}  // namespace
+}  // namespace fluorosim
