@@ -77,20 +77,21 @@ TEST(FluorescenceClosedForm, ThinLayerFullModel) { checkThinLayer(FluorescenceMo
 // Without scattering and with negligible re-absorption, the paper's model is exact too.
 TEST(FluorescenceClosedForm, ThinLayerPaperModel) { checkThinLayer(FluorescenceModel::Paper); }
 
-// A non-scattering, fully absorbing ball (99.9 % of the light reaching it) whose dye absorbs only in 440-500 nm and emits only in 600-700 nm, with Φ = 1:
-// every absorbed photon leaves as exactly one fluorescent photon. The absorbed power under a point
-// light at distance D is I ∫_cone (1 - exp(-σa chord(θ))) dΩ, chord = 2 sqrt(R² - D² sin²θ).
-TEST(FluorescenceClosedForm, AbsorbingBallReemitsEveryAbsorbedPhoton) {
-    const double R = 1, D = 5, I = 1, lambdaX = 470, molar = 1e-3;
-    const Fluorophore dye = separatedBandDye(1e5, 1.0);
+// A clear ball of radius R (mm) holding one dye, lit by a point light of line λx and intensity I (W/sr)
+// at distance D on the axis.
+Scene dyedBallUnderPointLight(const Fluorophore& dye, double molar, double R, double D, double I, double lambdaX) {
     Scene scene;
     scene.spectral.lambdaMin = 400;
     scene.spectral.lambdaMax = 750;
-    const int m = addDyedMedium(scene, "absorber", 0, 0, 0, 1, {{dye, molar}});
+    const int m = addDyedMedium(scene, dye.id(), 0, 0, 0, 1, {{dye, molar}});
     addDyedBall(scene, R, m, false);
     addPointLight(scene, Vec3(0, 0, D), Spectrum::lines({{lambdaX, I}}));
     scene.finalize();
-    const double sigma = dyeAbsorption(dye, lambdaX, molar);
+    return scene;
+}
+
+// Power (W) that such a ball absorbs: I ∫_cone (1 - exp(-σa chord(θ))) dΩ, chord = 2 sqrt(R² - D² sin²θ).
+double absorbedByBall(double sigma, double R, double D, double I) {
     const double thetaMax = std::asin(R / D);
     double absorbed = 0;
     const int n = 200000;
@@ -99,6 +100,19 @@ TEST(FluorescenceClosedForm, AbsorbingBallReemitsEveryAbsorbedPhoton) {
         const double chord = 2 * std::sqrt(std::max(0.0, R * R - D * D * sqr(std::sin(t))));
         absorbed += I * (1 - std::exp(-sigma * chord)) * 2 * kPi * std::sin(t) * thetaMax / n;
     }
+    return absorbed;
+}
+
+// A non-scattering, fully absorbing ball (99.9 % of the light reaching it) whose dye absorbs only in 440-500 nm and emits only in 600-700 nm, with Φ = 1:
+// every absorbed photon leaves as exactly one fluorescent photon. The absorbed power under a point
+// light at distance D is I ∫_cone (1 - exp(-σa chord(θ))) dΩ, chord = 2 sqrt(R² - D² sin²θ).
+TEST(FluorescenceClosedForm, AbsorbingBallReemitsEveryAbsorbedPhoton) {
+    const double R = 1, D = 5, I = 1, lambdaX = 470, molar = 1e-3;
+    const Fluorophore dye = separatedBandDye(1e5, 1.0);
+    const Scene scene = dyedBallUnderPointLight(dye, molar, R, D, I, lambdaX);
+    const double sigma = dyeAbsorption(dye, lambdaX, molar);
+    const double thetaMax = std::asin(R / D);
+    const double absorbed = absorbedByBall(sigma, R, D, I);
     std::printf("  sigma_a = %.3g /mm, absorbed power %.6g W (%.4f of the power reaching the ball)\n", sigma, absorbed,
                 absorbed / (I * 2 * kPi * (1 - std::cos(thetaMax))));
 
@@ -164,22 +178,10 @@ TEST(FluorescenceClosedForm, Af488ConcentrationSeriesSaturatesAndRollsOff) {
     std::vector<double> efficiency, efficiencyErr, brightness, brightnessErr;
     for (const auto& [gramsPerLitre, paths] : {std::pair{0.1, 400000}, std::pair{1.0, 400000}, std::pair{10.0, 400000}}) {
         const double molar = gramsPerLitre / molarMass;
-        Scene scene;
-        scene.spectral.lambdaMin = 400;
-        scene.spectral.lambdaMax = 750;
-        const int m = addDyedMedium(scene, "af488", 0, 0, 0, 1, {{dye, molar}});
-        addDyedBall(scene, R, m, false);
-        addPointLight(scene, Vec3(0, 0, D), Spectrum::lines({{lambdaX, I}}));
-        scene.finalize();
+        const Scene scene = dyedBallUnderPointLight(dye, molar, R, D, I, lambdaX);
         const double sigma = dyeAbsorption(dye, lambdaX, molar);
         const double thetaMax = std::asin(R / D);
-        double absorbed = 0;
-        const int n = 100000;
-        for (int i = 0; i < n; ++i) {
-            const double t = (i + 0.5) * thetaMax / n;
-            const double chord = 2 * std::sqrt(std::max(0.0, R * R - D * D * sqr(std::sin(t))));
-            absorbed += I * (1 - std::exp(-sigma * chord)) * 2 * kPi * std::sin(t) * thetaMax / n;
-        }
+        const double absorbed = absorbedByBall(sigma, R, D, I);
         const double reaching = I * 2 * kPi * (1 - std::cos(thetaMax));
         FluxSensorOptions s;
         s.radius = R * 1.0001;
