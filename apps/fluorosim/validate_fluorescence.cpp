@@ -101,7 +101,7 @@ void writeJson(const std::string& path, const nlohmann::json& j) {
 
 struct EmissionArgs : BallArgs {
     double excitation = 0;
-    int spp = 256;
+    int spp = 32768;
 };
 
 void runEmission(const EmissionArgs& a) {
@@ -260,7 +260,7 @@ void addFluorescenceValidations(CLI::App& validate) {
     CLI::App* e = validate.add_subcommand("emission", "Rendered fluorescence spectrum of a dyed ball against the dye's emission spectrum");
     addBallOptions(e, emission.get());
     e->add_option("--excitation", emission->excitation, "Excitation line, nm")->required();
-    e->add_option("--spp", emission->spp, "Samples per pixel (32x32 pixels)");
+    e->add_option("--spp", emission->spp, "Samples per pixel on 32x32 pixels (the default takes about 2 minutes on 2 cores)");
     e->callback([emission] { runEmission(*emission); });
 
     auto sweep = std::make_shared<SweepArgs>();
