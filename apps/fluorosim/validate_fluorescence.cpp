@@ -182,7 +182,8 @@ void runSweep(const SweepArgs& a) {
     for (double l = 200; l <= 1200; l += 1.0)
         if (b.dye.molarExtinction(l) > best) best = b.dye.molarExtinction(l), peak = l;
     std::vector<double> edges;
-    for (double l = std::floor(emLo); l < emHi + 2; l += 2) edges.push_back(l);
+    // 5 nm bands: the emission spectra are smooth on that scale, and narrower bands only add noise.
+    for (double l = std::floor(emLo); l < emHi + 5; l += 5) edges.push_back(l);
     std::vector<double> reference;
     for (size_t i = 0; i + 1 < edges.size(); ++i) reference.push_back(b.dye.emission().integral(edges[i], edges[i + 1]));
     normalizeToMax(reference);
