@@ -46,7 +46,7 @@ def main():
         for c in ("1mM", "10mM"):
             run(["validate", "emission", "--dye", "alexa_fluor_488", "--excitation", "499", "--spp", "4096", "--concentration", c],
                 path(f"em_af488_{c}.json"))
-        run(["validate", "sweep", "--dye", "AF488", "--from", "300", "--to", "700", "--step", "10", "--paths", "300000"], path("sweep_af488.json"))
+        run(["validate", "sweep", "--dye", "AF488", "--from", "300", "--to", "700", "--step", "10", "--paths", "3000000"], path("sweep_af488.json"))
         run(["validate", "sweep", "--dye", "AF488", "--from", "300", "--to", "700", "--step", "10", "--concentration", "1mM"],
             path("sweep_af488_1mM.json"))
 
