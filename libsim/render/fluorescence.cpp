@@ -4,7 +4,6 @@
 #include <cmath>
 #include <limits>
 
-
 namespace fluorosim {
 namespace {
 
@@ -12,16 +11,6 @@ namespace {
 // trade more (rouletted) sub-paths for less variance. On the forward-comparison balls, 16 instead of
 // 1 cut the standard error about 3x at about the same run time; 8 keeps dense media cheaper.
 constexpr double kBranchBoost = 8.0;
-
-const Spectrum& emissionSpectrum(const Light& light) {
-    return std::visit(
-        [](const auto& l) -> const Spectrum& {
-            using T = std::decay_t<decltype(l)>;
-            if constexpr (std::is_same_v<T, AreaLight>) return l.emission.radiance;
-            else return l.intensity;
-        },
-        light);
-}
 
 struct LightSpectra {
     std::vector<double> lines;

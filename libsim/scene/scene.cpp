@@ -11,6 +11,15 @@ std::optional<FluorescenceModel> fluorescenceModelFromName(const std::string& na
     return std::nullopt;
 }
 
+const Spectrum& emissionSpectrum(const Light& light) {
+    return std::visit(
+        [](const auto& l) -> const Spectrum& {
+            if constexpr (std::is_same_v<std::decay_t<decltype(l)>, AreaLight>) return l.emission.radiance;
+            else return l.intensity;
+        },
+        light);
+}
+
 const char* fluorescenceModelName(FluorescenceModel model) {
     switch (model) {
         case FluorescenceModel::Full: return "full";

@@ -46,6 +46,9 @@ struct SpotLight {
 };
 using Light = std::variant<AreaLight, PointLight, SpotLight>;
 
+// What a light emits: an area light's radiance, or a point or spot light's intensity.
+const Spectrum& emissionSpectrum(const Light& light);
+
 struct Camera {
     Vec3 position;
     Frame frame;        // n: forward, s: right, t: up

@@ -170,16 +170,7 @@ private:
     void checkLinesCovered(const Scene& scene) const {
         std::vector<double> lines;
         for (const Light& light : scene.lights)
-            std::visit(
-                [&](const auto& l) {
-                    using T = std::decay_t<decltype(l)>;
-                    const Spectrum& s = [&]() -> const Spectrum& {
-                        if constexpr (std::is_same_v<T, AreaLight>) return l.emission.radiance;
-                        else return l.intensity;
-                    }();
-                    for (const SpectralLine& line : s.spectralLines()) lines.push_back(line.lambdaNm);
-                },
-                light);
+            for (const SpectralLine& line : emissionSpectrum(light).spectralLines()) lines.push_back(line.lambdaNm);
         auto check = [&](const std::string& where, std::optional<std::pair<double, double>> range) {
             if (!range) return;
             for (double l : lines)
