@@ -1,7 +1,13 @@
 #pragma once
-// Participating media. A homogeneous medium has spectral absorption and scattering coefficients
-// (1/mm), a Henyey-Greenstein phase function and a refractive index. Coefficients are evaluated by
-// pure const functions with no hidden state, so later fitting code can differentiate them.
+// Participating media. A medium has spectral solvent absorption and scattering coefficients (1/mm),
+// dyes, a Henyey-Greenstein phase function and a refractive index. It is homogeneous, or its fields
+// vary in space through a VolumeFields (OpenVDB grids): then every coefficient is linear in a few
+// channels,
+//     sigma_a(p, λ) = a(p) sigma_a,solvent(λ) + Σ_i c_i(p) ln(10) ε_i(λ),   sigma_s(p, λ) = s(p) sigma_s(λ),
+// with channel 0 = a (solvent absorption scale), 1 = s (scattering scale), 2 + i = c_i (mol/L).
+// The per-channel spectra are evaluated once per set of wavelengths; the channel values per point.
+#include <array>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -10,6 +16,7 @@
 #include "media/free_flight.h"
 #include "media/henyey_greenstein.h"
 #include "spectral/spectrum.h"
+#include "volume/volume_fields.h"
 
 namespace fluorosim {
 
@@ -19,7 +26,7 @@ struct MediumSample {
 
 struct DyeComponent {
     Fluorophore dye;
-    double molar;  // concentration, mol/L
+    double molar;  // concentration, mol/L (unused when a grid holds the concentration)
 };
 
 // Absorption coefficient (1/mm) of a solvent holding dyes at the given concentrations (mol/L):
@@ -34,12 +41,58 @@ Scalar absorptionCoefficient(const Spectrum& solventAbsorption, const std::vecto
     return sum;
 }
 
-class HomogeneousMedium {
+inline constexpr int kMaxMediumChannels = 16;  // 2 + at most 14 dyes per medium
+inline constexpr int kSolventChannel = 0, kScatteringChannel = 1, kFirstDyeChannel = 2;
+using ChannelValues = std::array<double, kMaxMediumChannels>;
+
+// Coefficients per unit channel value at a set of sampled wavelengths.
+struct MediumSpectra {
+    int channels = 2;
+    std::array<SampledSpectrum, kMaxMediumChannels> sigmaA;  // sigmaA[kScatteringChannel] is zero
+    SampledSpectrum sigmaS;
+    MediumSample at(const double* ch) const {
+        MediumSample m{sigmaA[0] * ch[0], sigmaS * ch[kScatteringChannel]};
+        for (int c = kFirstDyeChannel; c < channels; ++c) m.sigmaA += sigmaA[c] * ch[c];
+        return m;
+    }
+};
+
+// Majorant segments of a medium along a ray: one segment for a homogeneous medium, the majorant
+// grid's DDA cells otherwise. `toMajorant(const double* channelMax)` turns the channels' bounds over a
+// segment into the majorant spectrum (it may add densities of its own, such as branch points).
+template <class ToMajorant>
+class MediumMajorantIterator {
 public:
-    // sigmaA is the solvent's own absorption; dyes add theirs. Throws ConfigError (naming `name`) for
-    // negative or non-finite coefficients or concentrations, |g| >= 1, ior < 1.
-    HomogeneousMedium(std::string name, Spectrum sigmaA, Spectrum sigmaS, double g, double ior,
-                      std::vector<DyeComponent> dyes = {});
+    MediumMajorantIterator(std::optional<VolumeFields::Traversal> traversal, double tMin, double tMax, const double* constants,
+                           ToMajorant toMajorant)
+        : traversal_(std::move(traversal)), tMin_(tMin), tMax_(tMax), constants_(constants), toMajorant_(std::move(toMajorant)) {}
+    std::optional<MajorantSegment<SampledSpectrum>> next() {
+        if (traversal_) {
+            const auto s = traversal_->next();
+            if (!s) return std::nullopt;
+            return MajorantSegment<SampledSpectrum>{s->tMin, s->tMax, toMajorant_(s->maxValues)};
+        }
+        if (done_) return std::nullopt;
+        done_ = true;
+        return MajorantSegment<SampledSpectrum>{tMin_, tMax_, toMajorant_(constants_)};
+    }
+
+private:
+    std::optional<VolumeFields::Traversal> traversal_;
+    double tMin_, tMax_;
+    const double* constants_;
+    ToMajorant toMajorant_;
+    bool done_ = false;
+};
+
+class Medium {
+public:
+    // sigmaA is the solvent's own absorption; dyes add theirs. `volume`, if given, has channels
+    // [solvent absorption scale, scattering scale, one per dye] (see the top of this file). Throws
+    // ConfigError (naming `name`) for negative or non-finite coefficients or concentrations, |g| >= 1,
+    // ior < 1, too many dyes or a volume with the wrong channel count.
+    Medium(std::string name, Spectrum sigmaA, Spectrum sigmaS, double g, double ior, std::vector<DyeComponent> dyes = {},
+           std::shared_ptr<const VolumeFields> volume = nullptr);
     const std::vector<DyeComponent>& dyes() const { return dyes_; }
 
     const std::string& name() const { return name_; }
@@ -48,20 +101,31 @@ public:
     double ior() const { return ior_; }
     const HenyeyGreenstein& phase() const { return phase_; }
     bool isVacuumLike() const { return vacuum_; }  // no absorption or scattering anywhere
+    bool isHomogeneous() const { return !volume_; }
+    const VolumeFields* volume() const { return volume_.get(); }
+    int channelCount() const { return kFirstDyeChannel + static_cast<int>(dyes_.size()); }
+    // Largest value of each channel anywhere in the medium (the constants when homogeneous).
+    const ChannelValues& channelMax() const { return channelMax_; }
 
-    MediumSample coefficients(const SampledWavelengths& wl) const {
-        MediumSample m{SampledSpectrum(0.0), sigmaS_.sample(wl)};
-        for (int i = 0; i < kNumWavelengths; ++i)
-            m.sigmaA[i] = absorptionCoefficient<double>(sigmaA_, dyes_, molar_, wl.lambda[i]);
-        return m;
+    MediumSpectra spectra(const SampledWavelengths& wl) const;
+    void channelValues(const Vec3& p, double* out) const {
+        if (volume_) volume_->values(p, out);
+        else std::copy(constants_.begin(), constants_.begin() + channelCount(), out);
     }
-    // Total absorption (solvent and dyes) and scattering at one wavelength, 1/mm.
+    MediumSample coefficients(const Vec3& p, const SampledWavelengths& wl) const {
+        ChannelValues ch;
+        channelValues(p, ch.data());
+        return spectra(wl).at(ch.data());
+    }
+    // Total absorption (solvent and dyes) and scattering at one wavelength, 1/mm, of a homogeneous medium.
     double absorptionAt(double lambdaNm) const { return absorptionCoefficient<double>(sigmaA_, dyes_, molar_, lambdaNm); }
     double scatteringAt(double lambdaNm) const { return sigmaS_(lambdaNm); }
-    HomogeneousMajorantIterator<SampledSpectrum> majorants(double tMin, double tMax,
-                                                           const SampledWavelengths& wl) const {
-        const MediumSample m = coefficients(wl);
-        return {tMin, tMax, m.sigmaA + m.sigmaS};
+
+    template <class ToMajorant>
+    MediumMajorantIterator<ToMajorant> majorants(const Ray& ray, double tMin, double tMax, ToMajorant toMajorant) const {
+        std::optional<VolumeFields::Traversal> tr;
+        if (volume_) tr = volume_->traverse(ray, tMin, tMax);
+        return {std::move(tr), tMin, tMax, constants_.data(), std::move(toMajorant)};
     }
 
 private:
@@ -69,6 +133,8 @@ private:
     Spectrum sigmaA_, sigmaS_;
     std::vector<DyeComponent> dyes_;
     std::vector<double> molar_;
+    std::shared_ptr<const VolumeFields> volume_;
+    ChannelValues constants_{}, channelMax_{};
     HenyeyGreenstein phase_;
     double ior_;
     bool vacuum_;

@@ -27,7 +27,9 @@ LightSpectra lightSpectra(const Scene& scene) {
     return out;
 }
 
-bool canEmit(const DyeComponent& d) { return d.molar > 0 && d.dye.quantumYield() > 0; }
+// The dye's largest concentration anywhere in its medium, mol/L.
+double maxMolar(const Medium& m, size_t dye) { return m.channelMax()[kFirstDyeChannel + dye]; }
+bool canEmit(const Medium& m, size_t dye) { return maxMolar(m, dye) > 0 && m.dyes()[dye].dye.quantumYield() > 0; }
 
 struct Interval {
     double lo = std::numeric_limits<double>::infinity(), hi = -std::numeric_limits<double>::infinity();
@@ -49,9 +51,10 @@ struct DyeBands {
 
 DyeBands dyeBands(const Scene& scene) {
     DyeBands b;
-    for (const HomogeneousMedium& m : scene.media)
-        for (const DyeComponent& d : m.dyes()) {
-            if (!canEmit(d)) continue;
+    for (const Medium& m : scene.media)
+        for (size_t i = 0; i < m.dyes().size(); ++i) {
+            if (!canEmit(m, i)) continue;
+            const DyeComponent& d = m.dyes()[i];
             b.absorption.add(d.dye.excitationSupport());
             b.emission.add(d.dye.emissionSupport());
             b.absorptionBands.push_back(d.dye.excitationSupport());
@@ -94,10 +97,11 @@ WavelengthSampler cameraWavelengthSampler(const Scene& scene, bool fluorescenceA
     std::vector<double> density(static_cast<size_t>(cells), 0.0);
     const double width = (emission.hi - emission.lo) / cells;
     double total = 0;
-    for (const HomogeneousMedium& m : scene.media)
-        for (const DyeComponent& d : m.dyes()) {
-            if (!canEmit(d)) continue;
-            const double w = d.dye.quantumYield() * dyePeakAbsorption(d.dye, d.molar);
+    for (const Medium& m : scene.media)
+        for (size_t i = 0; i < m.dyes().size(); ++i) {
+            if (!canEmit(m, i)) continue;
+            const DyeComponent& d = m.dyes()[i];
+            const double w = d.dye.quantumYield() * dyePeakAbsorption(d.dye, maxMolar(m, i));
             for (int c = 0; c < cells; ++c) {
                 const double a = emission.lo + c * width;
                 const double v = w * d.dye.emission().integral(a, a + width);
@@ -118,27 +122,29 @@ FluorescencePlan::FluorescencePlan(const Scene& scene)
     media_.resize(scene.media.size());
     bool anyDye = false;
     for (size_t m = 0; m < scene.media.size(); ++m)
-        for (const DyeComponent& d : scene.media[m].dyes()) {
-            if (!canEmit(d)) continue;
+        for (size_t i = 0; i < scene.media[m].dyes().size(); ++i) {
+            if (!canEmit(scene.media[m], i)) continue;
+            const DyeComponent& d = scene.media[m].dyes()[i];
             // Not weighted by Φ: the branch's weight carries Φ, so a dim dye would otherwise get fewer
             // branches for the same relative noise (measured: AF555, Φ = 0.1, had 5x the spectral noise).
-            const double weight = kBranchBoost * dyePeakAbsorption(d.dye, d.molar) / d.dye.emissionPdfMax();
-            media_[m].dyes.push_back({&d.dye, d.molar, weight});
+            const double weight = kBranchBoost * dyePeakAbsorption(d.dye, 1.0) / d.dye.emissionPdfMax();
+            media_[m].dyes.push_back({&d.dye, kFirstDyeChannel + static_cast<int>(i), weight});
             anyDye = true;
         }
     active_ = active_ && anyDye;
 }
 
-double FluorescencePlan::branchDensity(int medium, double lambda) const {
+double FluorescencePlan::branchDensity(int medium, const double* channels, double lambda) const {
     double sum = 0;
-    for (const DyeTerm& t : media_[static_cast<size_t>(medium)].dyes) sum += t.branchWeight * t.dye->emissionPdf(lambda);
+    for (const DyeTerm& t : media_[static_cast<size_t>(medium)].dyes)
+        sum += channels[t.channel] * t.branchWeight * t.dye->emissionPdf(lambda);
     return sum;
 }
 
-double FluorescencePlan::kernel(int medium, double lambdaExcitation, double lambda) const {
+double FluorescencePlan::kernel(int medium, const double* channels, double lambdaExcitation, double lambda) const {
     double sum = 0;
     for (const DyeTerm& t : media_[static_cast<size_t>(medium)].dyes)
-        sum += t.dye->quantumYield() * t.dye->emissionPdf(lambda) * dyeAbsorption(*t.dye, lambdaExcitation, t.molar);
+        sum += t.dye->quantumYield() * t.dye->emissionPdf(lambda) * dyeAbsorption(*t.dye, lambdaExcitation, channels[t.channel]);
     return sum * lambdaExcitation / lambda;
 }
 

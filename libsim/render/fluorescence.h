@@ -24,16 +24,18 @@ public:
     bool active(int medium) const { return active_ && medium >= 0 && !media_[static_cast<size_t>(medium)].dyes.empty(); }
     FluorescenceModel model() const { return model_; }
 
-    // Density (1/mm) of fluorescence branch points along a camera path at `lambda`: 8 Σ_i σa,i(peak)
-    // f_i(λ)/max f_i (over dyes with Φ > 0). Added to the free-flight majorant as null density, and every tentative collision
+    // Density (1/mm) of fluorescence branch points along a camera path at `lambda`, at a point with
+    // the medium's channel values `channels` (concentrations c_i): 8 Σ_i σa,i(peak; c_i) f_i(λ)/max f_i
+    // (over dyes with Φ > 0). It is linear in the concentrations, so the medium's majorant grid bounds it. Added to the free-flight majorant as null density, and every tentative collision
     // branches with probability branchDensity/majorant, so the source term is sampled even where the
     // dye does not absorb at the camera's wavelength. Any positive choice is unbiased; this one follows
     // the emission shape and the dye's strength.
-    double branchDensity(int medium, double lambda) const;
+    double branchDensity(int medium, const double* channels, double lambda) const;
 
-    // Inelastic kernel in radiance units (1/(mm nm)): Σ_i Φ_i f_i(λ) σa,i(λx) λx/λ. The factor λx/λ
+    // Inelastic kernel in radiance units (1/(mm nm)) at a point with channel values `channels`:
+    // Σ_i Φ_i f_i(λ) σa,i(λx; c_i) λx/λ. The factor λx/λ
     // turns photons counted by Φ into energy.
-    double kernel(int medium, double lambdaExcitation, double lambda) const;
+    double kernel(int medium, const double* channels, double lambdaExcitation, double lambda) const;
 
     // Excitation wavelengths of a sub-path: the lights' lines that some dye absorbs, plus a continuous
     // part over the dyes' absorption bands when a light is continuous or when one dye's emission can
@@ -44,8 +46,8 @@ public:
 private:
     struct DyeTerm {
         const Fluorophore* dye;
-        double molar;
-        double branchWeight;        // Φ σa(peak) / max f
+        int channel;                // the medium channel holding its concentration
+        double branchWeight;        // kBranchBoost σa(peak; 1 M) / max f
     };
     struct MediumTerms {
         std::vector<DyeTerm> dyes;  // only dyes that can emit

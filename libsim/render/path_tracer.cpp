@@ -27,9 +27,15 @@ int PathTracer::mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const
     return dot(dir, n) < 0 ? shape.insideMedium : shape.outsideMedium;
 }
 
-SampledSpectrum PathTracer::transmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl,
+SampledSpectrum PathTracer::transmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl, Rng& rng,
                                          const Vec3* surfaceNormal, double surfaceEpsilon) const {
-    SampledSpectrum T(1.0);
+    const TransmittanceEstimate e = estimateTransmittance(p0, p1, medium, wl, rng, surfaceNormal, surfaceEpsilon);
+    return e.T ? e.T / e.r_l.average() : e.T;
+}
+
+PathTracer::TransmittanceEstimate PathTracer::estimateTransmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl,
+                                                                    Rng& rng, const Vec3* surfaceNormal, double surfaceEpsilon) const {
+    TransmittanceEstimate e{SampledSpectrum(1.0), SampledSpectrum(1.0), SampledSpectrum(1.0)};
     // Rays start exactly on surfaces and skip self-intersections with tMin, so every segment lies on
     // the line from p0 to p1 and its length is exact.
     Vec3 origin = p0;
@@ -40,27 +46,64 @@ SampledSpectrum PathTracer::transmittance(const Vec3& p0, const Vec3& p1, int me
     for (int crossings = 0; crossings < 1000000; ++crossings) {
         const Vec3 d = p1 - origin;
         const double dist = length(d);
-        if (!(dist > 0)) return T;
+        if (!(dist > 0)) return e;
         const Ray r{origin, d / dist};
         const double tMin = normal ? epsilon / std::max(std::abs(dot(*normal, r.d)), 1e-2) : 0.0;
         const double tMax = dist - rayEpsilon(p1);
         const auto hit = tMax > tMin ? scene_.geometry.intersect(r, tMin, tMax) : std::nullopt;
         const double segment = hit ? hit->t : dist;
-        if (medium != kNone) {
-            // Homogeneous media: the exact transmittance, with no sampling noise.
-            const MediumSample m = scene_.media[static_cast<size_t>(medium)].coefficients(wl);
-            T *= expNeg((m.sigmaA + m.sigmaS) * segment);
+        if (medium != kNone && !scene_.media[static_cast<size_t>(medium)].isVacuumLike()) {
+            const Medium& med = scene_.media[static_cast<size_t>(medium)];
+            const MediumSpectra spec = med.spectra(wl);
+            if (med.isHomogeneous()) {
+                // The exact transmittance, with no sampling noise.
+                const MediumSample m = spec.at(med.channelMax().data());
+                e.T *= expNeg((m.sigmaA + m.sigmaS) * segment);
+            } else if (!ratioTrack(med, spec, r, segment, rng, e)) {
+                return {SampledSpectrum(0.0), e.r_u, e.r_l};
+            }
         }
-        if (!hit) return T;
+        if (!hit) return e;
         const ShapeInfo& s = scene_.shapes[hit->shape];
-        if (!(s.isInterface && s.material == kNone)) return SampledSpectrum(0.0);
+        if (!(s.isInterface && s.material == kNone)) return {SampledSpectrum(0.0), e.r_u, e.r_l};
         medium = mediumAfterCrossing(s, hit->n, r.d, medium);
         origin = r.at(hit->t);
         lastNormal = hit->n;
         normal = &lastNormal;
         epsilon = hit->epsilon;
     }
-    return SampledSpectrum(0.0);
+    return {SampledSpectrum(0.0), e.r_u, e.r_l};
+}
+
+bool PathTracer::ratioTrack(const Medium& med, const MediumSpectra& spec, const Ray& r, double length, Rng& rng,
+                            TransmittanceEstimate& e) const {
+    // Ratio tracking (pbrt-v4's TraceTransmittance) with the hero wavelength's majorant; r_u and r_l
+    // carry the path pdf ratios that spectral MIS needs, with roulette once the estimate is small.
+    auto majorants = med.majorants(r, 0.0, length, [&](const double* m) {
+        const MediumSample s = spec.at(m);
+        return s.sigmaA + s.sigmaS;
+    });
+    const SampledSpectrum T_maj = sampleTmaj<SampledSpectrum>(majorants, rng, [&](double t, const SampledSpectrum& sigmaMaj, const SampledSpectrum& Tm) {
+        ChannelValues ch;
+        med.channelValues(r.at(t), ch.data());
+        const MediumSample mp = spec.at(ch.data());
+        const SampledSpectrum sigmaN = clampZero(sigmaMaj - mp.sigmaA - mp.sigmaS);
+        const double pdf = Tm[0] * sigmaMaj[0];
+        e.T *= Tm * sigmaN / pdf;
+        e.r_l *= Tm * sigmaMaj / pdf;
+        e.r_u *= Tm * sigmaN / pdf;
+        const SampledSpectrum Tr = e.T / (e.r_l + e.r_u).average();
+        if (Tr.maxComponent() < 0.05) {
+            if (rng.uniform() < 0.75) e.T = SampledSpectrum(0.0);
+            else e.T /= 0.25;
+        }
+        return bool(e.T);
+    });
+    if (!e.T) return false;
+    e.T *= T_maj / T_maj[0];
+    e.r_l *= T_maj / T_maj[0];
+    e.r_u *= T_maj / T_maj[0];
+    return bool(e.T);
 }
 
 struct PathTracer::PathState {
@@ -84,8 +127,8 @@ PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths&
     return trace(state, wl, rng, stats);
 }
 
-SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const SampledWavelengths& wl, const SampledSpectrum& weight,
-                                         Rng& rng, PathStats& stats, int generation, int depth) const {
+SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double* channels, const SampledWavelengths& wl,
+                                         const SampledSpectrum& weight, Rng& rng, PathStats& stats, int generation, int depth) const {
     // Generations are ended by roulette; this cap only guards the stack and is reported if reached.
     constexpr int kMaxGenerations = 64;
     if (generation >= kMaxGenerations) {
@@ -101,7 +144,7 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const Sample
         if (wlx.pdf[k] == 0) continue;
         for (int j = 0; j < kNumWavelengths; ++j) {
             if (weight[j] == 0) continue;
-            A[j][k] = weight[j] * fluorescence_.kernel(medium, wlx.lambda[k], wl.lambda[j]) / (wlx.pdf[k] * kNumWavelengths);
+            A[j][k] = weight[j] * fluorescence_.kernel(medium, channels, wlx.lambda[k], wl.lambda[j]) / (wlx.pdf[k] * kNumWavelengths);
             start[k] = std::max(start[k], A[j][k]);
         }
     }
@@ -123,7 +166,7 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const Sample
     if (fluorescence_.model() == FluorescenceModel::Paper) {
         const double uLight = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform();
         if (const auto ls = lights_.sample(p, uLight, u1, u2, wlx); ls && ls->L && ls->pdf > 0)
-            Lx = start * transmittance(p, ls->p, medium, wlx) * ls->L * (kInv4Pi / ls->pdf);
+            Lx = start * transmittance(p, ls->p, medium, wlx, rng) * ls->L * (kInv4Pi / ls->pdf);
     } else {
         PathState sub;
         sub.ray = Ray{p, Vec3(0, 0, 1)};
@@ -176,12 +219,12 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         if (!fHat) return SampledSpectrum(0.0);
         int startMedium = lightMedium;
         if (surface) startMedium = mediumAfterCrossing(*surface, nOffset, ls->wi, lightMedium);
-        const SampledSpectrum T = transmittance(p, ls->p, startMedium, wl, surface ? &nOffset : nullptr, surfaceEps);
-        if (!T) return SampledSpectrum(0.0);
-        const SampledSpectrum rl = r_p * ls->pdf;
-        if (ls->delta) return beta * fHat * T * ls->L / rl.average();
-        const SampledSpectrum ru = r_p * scatterPdf;
-        return beta * fHat * T * ls->L / (rl + ru).average();
+        const TransmittanceEstimate T = estimateTransmittance(p, ls->p, startMedium, wl, rng, surface ? &nOffset : nullptr, surfaceEps);
+        if (!T.T) return SampledSpectrum(0.0);
+        const SampledSpectrum rl = T.r_l * r_p * ls->pdf;
+        if (ls->delta) return beta * fHat * T.T * ls->L / rl.average();
+        const SampledSpectrum ru = T.r_u * r_p * scatterPdf;
+        return beta * fHat * T.T * ls->L / (rl + ru).average();
     };
 
     // A real scattering vertex in a medium: NEE with MIS, then a new direction from the phase function
@@ -211,30 +254,56 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
     while (true) {
         const auto hit = scene_.geometry.intersect(ray, 0.0, std::numeric_limits<double>::infinity());
         if (medium != kNone && !scene_.media[static_cast<size_t>(medium)].isVacuumLike()) {
-            const HomogeneousMedium& med = scene_.media[static_cast<size_t>(medium)];
+            const Medium& med = scene_.media[static_cast<size_t>(medium)];
             const double tMax = hit ? hit->t : std::numeric_limits<double>::infinity();
             bool scattered = false, terminated = false;
-            const MediumSample mp = med.coefficients(wl);
+            const MediumSpectra spec = med.spectra(wl);
             // Fluorescence branch points are extra null density, so the source term is sampled even
             // where the dye barely absorbs at these wavelengths.
             // A path at a spectral line estimates the line's delta weight. Re-emitted light is a
             // continuous density and adds nothing to it (the continuous wavelength branch covers it
             // at that wavelength), so such paths never branch; this also ends every cascade there.
             const bool dyed = !wl.discrete && fluorescence_.active(medium);
-            SampledSpectrum sigmaB(0.0);
+            // Branch density per unit of each channel (it is linear in the concentrations).
+            std::array<SampledSpectrum, kMaxMediumChannels> branchPerChannel{};
+            if (dyed) {
+                ChannelValues unit{};
+                for (int c = kFirstDyeChannel; c < spec.channels; ++c) {
+                    unit[c] = 1;
+                    for (int j = 0; j < kNumWavelengths; ++j) branchPerChannel[c][j] = fluorescence_.branchDensity(medium, unit.data(), wl.lambda[j]);
+                    unit[c] = 0;
+                }
+            }
             // Capped at max(σt, 1/mm): where the medium is already dense its real collisions are enough,
             // and a concentrated dye (σa ~ 10^2-10^3 /mm) must not flood the path with branch points.
-            if (dyed)
-                for (int j = 0; j < kNumWavelengths; ++j)
-                    sigmaB[j] = std::min(fluorescence_.branchDensity(medium, wl.lambda[j]), std::max(mp.sigmaA[j] + mp.sigmaS[j], 1.0));
-            HomogeneousMajorantIterator<SampledSpectrum> majorants{0.0, tMax, mp.sigmaA + mp.sigmaS + sigmaB};
+            // The same formula applied to a segment's channel maxima bounds it over the segment.
+            auto branchDensity = [&](const double* ch, const SampledSpectrum& sigmaT) {
+                SampledSpectrum b(0.0);
+                if (!dyed) return b;
+                for (int c = kFirstDyeChannel; c < spec.channels; ++c) b += branchPerChannel[c] * ch[c];
+                for (int j = 0; j < kNumWavelengths; ++j) b[j] = std::min(b[j], std::max(sigmaT[j], 1.0));
+                return b;
+            };
+            auto majorants = med.majorants(ray, 0.0, tMax, [&](const double* m) {
+                const MediumSample s = spec.at(m);
+                const SampledSpectrum sigmaT = s.sigmaA + s.sigmaS;
+                return sigmaT + branchDensity(m, sigmaT);
+            });
+            ChannelValues ch;
             const SampledSpectrum T_maj = sampleTmaj<SampledSpectrum>(
                 majorants, rng, [&](double t, const SampledSpectrum& sigmaMaj, const SampledSpectrum& Tm) {
-                    if (dyed && rng.uniform() * sigmaMaj[0] < sigmaB[0]) {
-                        const double pdf = Tm[0] * sigmaB[0];
-                        const SampledSpectrum r_e = r_u * sigmaB * Tm / pdf;
-                        if (r_e)
-                            Lf += fluorescence(ray.at(t), medium, wl, beta * Tm / (pdf * r_e.average()), rng, stats, st.generation, depth);
+                    ++stats.tentativeCollisions;
+                    med.channelValues(ray.at(t), ch.data());
+                    const MediumSample mp = spec.at(ch.data());
+                    if (dyed) {
+                        const SampledSpectrum sigmaB = branchDensity(ch.data(), mp.sigmaA + mp.sigmaS);
+                        if (rng.uniform() * sigmaMaj[0] < sigmaB[0]) {
+                            const double pdf = Tm[0] * sigmaB[0];
+                            const SampledSpectrum r_e = r_u * sigmaB * Tm / pdf;
+                            if (r_e)
+                                Lf += fluorescence(ray.at(t), medium, ch.data(), wl, beta * Tm / (pdf * r_e.average()), rng, stats,
+                                                   st.generation, depth);
+                        }
                     }
                     const double pAbsorb = mp.sigmaA[0] / sigmaMaj[0];
                     const double pScatter = mp.sigmaS[0] / sigmaMaj[0];
@@ -242,6 +311,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                     const std::array<double, 3> probs{pAbsorb, pScatter, pNull};
                     const int mode = sampleDiscrete(probs, rng.uniform());
                     if (mode == 0) {
+                        ++stats.absorptionEvents;
                         terminated = true;
                         return false;
                     }

@@ -21,12 +21,16 @@ namespace fluorosim {
 struct PathStats {
     uint64_t paths = 0;
     uint64_t scatteringEvents = 0;   // real collisions in media
+    uint64_t absorptionEvents = 0;
+    uint64_t tentativeCollisions = 0;  // all collisions sampled against the majorant (real, null, branch points)
     uint64_t surfaceBounces = 0;
     uint64_t fluorescenceBranches = 0;  // excitation sub-paths started
     uint64_t truncated = 0;          // paths stopped by the safety depth cap (a bias, so it is reported)
     void add(const PathStats& o) {
         paths += o.paths;
         scatteringEvents += o.scatteringEvents;
+        absorptionEvents += o.absorptionEvents;
+        tentativeCollisions += o.tentativeCollisions;
         surfaceBounces += o.surfaceBounces;
         fluorescenceBranches += o.fluorescenceBranches;
         truncated += o.truncated;
@@ -46,20 +50,30 @@ public:
     // Radiance arriving along -ray.d at ray.o, for a ray that starts in `medium`.
     PathRadiance radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;
 
-    // Transmittance from p0 to p1 through null interfaces and media; zero if a surface blocks.
+    // Transmittance from p0 to p1 through null interfaces and media; zero if a surface blocks. Exact in
+    // homogeneous media, a ratio-tracking estimate in grid media (unbiased at the hero wavelength, and
+    // at every wavelength whose coefficients are proportional to the hero's).
     // When p0 lies on a surface, pass its normal so the ray leaves it without self-intersection.
-    SampledSpectrum transmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl,
+    SampledSpectrum transmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl, Rng& rng,
                                   const Vec3* surfaceNormal = nullptr, double surfaceEpsilon = 0.0) const;
 
     const FluorescencePlan& fluorescence() const { return fluorescence_; }
 
 private:
     struct PathState;
+    // Transmittance with the path pdf ratios of its null collisions (pbrt-v4's T_ray, r_u, r_l).
+    struct TransmittanceEstimate {
+        SampledSpectrum T, r_u, r_l;
+    };
+    TransmittanceEstimate estimateTransmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl, Rng& rng,
+                                                const Vec3* surfaceNormal, double surfaceEpsilon) const;
+    // Ratio tracking over [0, length) of r in a grid medium; false once the estimate is zero.
+    bool ratioTrack(const Medium& med, const MediumSpectra& spec, const Ray& r, double length, Rng& rng, TransmittanceEstimate& e) const;
     PathRadiance trace(PathState& state, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;
     // Radiance re-emitted at p towards the path, at the camera wavelengths, for a branch whose
     // source-term estimate is multiplied by `weight` (throughput over branch pdf, MIS-normalized).
-    SampledSpectrum fluorescence(const Vec3& p, int medium, const SampledWavelengths& wl, const SampledSpectrum& weight, Rng& rng,
-                                 PathStats& stats, int generation, int depth) const;
+    SampledSpectrum fluorescence(const Vec3& p, int medium, const double* channels, const SampledWavelengths& wl,
+                                 const SampledSpectrum& weight, Rng& rng, PathStats& stats, int generation, int depth) const;
     int mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const Vec3& dir, int current) const;
 
     const Scene& scene_;

@@ -47,6 +47,8 @@ public:
             if (!std::holds_alternative<PointLight>(l)) throw ConfigError("the forward photon tracer supports point lights only");
             points_.push_back(&std::get<PointLight>(l));
         }
+        for (const Medium& m : scene_.media)
+            if (!m.isHomogeneous()) throw ConfigError("the forward photon tracer supports homogeneous media only (medium \"" + m.name() + "\")");
         if (points_.empty()) throw ConfigError("the forward photon tracer needs at least one point light");
     }
 
@@ -70,7 +72,7 @@ public:
         for (int events = 0; events < 100000000; ++events) {
             const auto hit = scene_.geometry.intersect(ph.ray, 0.0, std::numeric_limits<double>::infinity());
             if (ph.medium != kNone) {
-                const HomogeneousMedium& m = scene_.media[static_cast<size_t>(ph.medium)];
+                const Medium& m = scene_.media[static_cast<size_t>(ph.medium)];
                 const double sa = m.absorptionAt(ph.lambda), ss = m.scatteringAt(ph.lambda);
                 const double st = sa + ss;
                 const double s = st > 0 ? -std::log(1 - rng.uniform()) / st : std::numeric_limits<double>::infinity();

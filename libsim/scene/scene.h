@@ -82,7 +82,7 @@ struct Scene {
     std::vector<ShapeInfo> shapes;  // indexed by shape id
     std::vector<std::unique_ptr<Material>> materials;
     std::vector<std::string> materialNames;
-    std::vector<HomogeneousMedium> media;
+    std::vector<Medium> media;
     std::vector<Light> lights;
     Camera camera;
     SpectralSettings spectral;

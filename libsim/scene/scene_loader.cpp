@@ -11,6 +11,8 @@
 #include "core/errors.h"
 #include "core/math.h"
 #include "core/units.h"
+#include "volume/density_grid.h"
+#include "volume/volume_fields.h"
 
 namespace fluorosim {
 namespace {
@@ -178,7 +180,7 @@ private:
                     throw ConfigError(file_.string() + ": " + where + ": tabulated from " + fmtNm(range->first) + " to " + fmtNm(range->second) +
                                       " nm, which does not cover the light's spectral line at " + fmtNm(l) + " nm");
         };
-        for (const HomogeneousMedium& m : scene.media) {
+        for (const Medium& m : scene.media) {
             check("/media/" + m.name() + "/sigma_a", m.solventAbsorption().tableRange());
             check("/media/" + m.name() + "/sigma_s", m.scattering().tableRange());
             for (size_t i = 0; i < m.dyes().size(); ++i)
@@ -325,26 +327,131 @@ private:
         n.requireObject();
         for (auto it = n.raw().begin(); it != n.raw().end(); ++it) {
             const Node m(it.value(), n.path() + "/" + it.key(), file_);
-            m.allowOnly({"sigma_a", "sigma_s", "g", "ior", "dyes"});
+            m.allowOnly({"sigma_a", "sigma_s", "g", "ior", "dyes", "volume"});
             const Spectrum sa = m.has("sigma_a") ? spectrum(m.at("sigma_a"), SpectrumKind::Coefficient) : Spectrum::constant(0);
             const Spectrum ss = m.has("sigma_s") ? spectrum(m.at("sigma_s"), SpectrumKind::Coefficient) : Spectrum::constant(0);
             const double g = m.has("g") ? m.at("g").number(-1, 1, true, true) : 0.0;
             const double ior = m.has("ior") ? m.at("ior").number(1, 10) : 1.0;
+            std::vector<DyeEntry> entries;
+            if (m.has("dyes")) entries = loadDyes(m.at("dyes"));
             std::vector<DyeComponent> dyes;
-            if (m.has("dyes")) dyes = loadDyes(m.at("dyes"));
+            bool anyGrid = false;
+            for (const DyeEntry& e : entries) {
+                dyes.push_back(e.component);
+                anyGrid = anyGrid || e.grid.has_value();
+            }
+            std::shared_ptr<const VolumeFields> volume;
+            if (m.has("volume")) volume = loadVolume(m.at("volume"), entries);
+            else if (anyGrid) m.fail("a dye takes its concentration from a grid, but the medium has no \"volume\"");
             mediumIndex_[it.key()] = static_cast<int>(scene.media.size());
-            scene.media.emplace_back(it.key(), sa, ss, g, ior, std::move(dyes));
+            try {
+                scene.media.emplace_back(it.key(), sa, ss, g, ior, std::move(dyes), std::move(volume));
+            } catch (const ConfigError& e) {
+                m.failQuoted(e.what());
+            }
         }
     }
 
-    // [{"dye": "AF488", "concentration": "10 uM"}, {"dye": "...", "concentration": "0.1 g/L", "molar_mass": "643.4 g/mol"}]
-    std::vector<DyeComponent> loadDyes(const Node& n) {
+    struct DyeEntry {
+        DyeComponent component;             // molar: the constant concentration, or mol/L per grid unit
+        std::optional<std::string> grid;    // the grid holding its concentration
+        std::optional<Node> gridNode;
+        std::optional<Node> entryNode;
+    };
+
+    // {"file": "neurons.vdb", "length_unit": "mm", "translate": [...], "scale": 1, "interpolation":
+    // "trilinear", "scattering_grid": "...", "absorption_grid": "...", "label_grid": "...",
+    // "majorant_cell_voxels": 0}
+    std::shared_ptr<const VolumeFields> loadVolume(const Node& v, const std::vector<DyeEntry>& dyes) {
+        v.allowOnly({"file", "length_unit", "translate", "scale", "interpolation", "scattering_grid", "absorption_grid", "label_grid",
+                     "majorant_cell_voxels"});
+        fs::path f = v.at("file").str();
+        if (f.is_relative()) f = baseDir_ / f;
+        auto readGrid = [&](const Node& name, bool labels = false) {
+            try {
+                return DensityGrid::read(f.string(), name.str(), labels);
+            } catch (const IoError& e) {
+                v.at("file").failIo(e.what());
+            } catch (const Error& e) {
+                name.failQuoted(e.what());
+            }
+        };
+        Interpolation interpolation = Interpolation::Trilinear;
+        if (v.has("interpolation")) {
+            const std::string i = v.at("interpolation").str();
+            if (i == "nearest") interpolation = Interpolation::Nearest;
+            else if (i != "trilinear") v.at("interpolation").fail("expected \"trilinear\" or \"nearest\"");
+        }
+        MajorantGridOptions majorants;
+        if (v.has("majorant_cell_voxels")) majorants.cellVoxels = static_cast<int>(v.at("majorant_cell_voxels").number(-1, 1 << 20));
+        std::vector<VolumeChannel> channels(kFirstDyeChannel + dyes.size());
+        std::optional<DensityGrid> reference;  // sets the length unit
+        auto gridChannel = [&](const char* key, VolumeChannel& c) {
+            if (!v.has(key)) return;
+            c.grid = readGrid(v.at(key));
+            if (!reference) reference = c.grid;
+        };
+        gridChannel("absorption_grid", channels[kSolventChannel]);
+        gridChannel("scattering_grid", channels[kScatteringChannel]);
+        if (!channels[kSolventChannel].grid) channels[kSolventChannel].offset = 1;
+        if (!channels[kScatteringChannel].grid) channels[kScatteringChannel].offset = 1;
+        for (size_t i = 0; i < dyes.size(); ++i) {
+            VolumeChannel& c = channels[kFirstDyeChannel + i];
+            if (!dyes[i].grid) {
+                c.offset = dyes[i].component.molar;
+                continue;
+            }
+            c.grid = readGrid(*dyes[i].gridNode);
+            if (!reference) reference = c.grid;
+            c.scale = gridConcentrationScale(*dyes[i].entryNode, *c.grid);
+        }
+        if (v.has("label_grid")) (void)readGrid(v.at("label_grid"), true);  // checked now; kept for tools, not transport
+        if (!reference) v.fail("the volume names no grid (give a dye \"grid\", \"scattering_grid\" or \"absorption_grid\")");
+        // Length unit of the file's coordinates: the scene's word first, then the file's metadata.
+        std::string unit = v.has("length_unit") ? v.at("length_unit").str() : reference->metadata().lengthUnit;
+        if (unit.empty())
+            v.fail("the grids in " + f.string() + " carry no \"length_unit\" metadata; give \"length_unit\" (e.g. \"um\") for the file's coordinates");
+        const auto unitScaleMm = unitScale(unit, Dimension::Length);
+        if (!unitScaleMm) {
+            if (v.has("length_unit")) v.at("length_unit").fail("expected a length unit such as \"mm\" or \"um\"");
+            v.fail("the file's length_unit metadata \"" + unit + "\" is not a length unit");
+        }
+        const double scale = v.has("scale") ? v.at("scale").number(0, 1e9, true) : 1.0;
+        Affine worldFromFile = Affine::scaling(*unitScaleMm * scale);
+        if (v.has("translate")) worldFromFile = worldFromFile.then(Affine::translation(v.at("translate").vec3(Dimension::Length)));
+        try {
+            return std::make_shared<const VolumeFields>(std::move(channels), worldFromFile, interpolation, majorants);
+        } catch (const ConfigError& e) {
+            v.failQuoted(e.what());
+        }
+    }
+
+    // mol/L per unit value of a concentration grid: "grid_units" in the scene, else the grid's "units".
+    double gridConcentrationScale(const Node& d, const DensityGrid& grid) {
+        const std::string units = d.has("grid_units") ? d.at("grid_units").str() : grid.metadata().units;
+        if (units.empty())
+            d.fail("grid \"" + grid.name() + "\" carries no \"units\" metadata; give \"grid_units\" (e.g. \"uM\")");
+        if (const auto molar = unitScale(units, Dimension::MolarConcentration)) {
+            if (d.has("molar_mass")) d.at("molar_mass").fail("a molar mass is only used with mass concentration units such as \"g/L\"");
+            return *molar;
+        }
+        if (const auto mass = unitScale(units, Dimension::MassConcentration)) {
+            if (!d.has("molar_mass")) d.fail("grid units \"" + units + "\" are a mass concentration; give \"molar_mass\"");
+            return *mass / d.at("molar_mass").positiveQuantity(Dimension::MolarMass);
+        }
+        if (d.has("grid_units")) d.at("grid_units").fail("expected concentration units such as \"uM\", \"mM\" or \"g/L\"");
+        d.fail("grid \"" + grid.name() + "\" has units \"" + units + "\", which are not a concentration");
+    }
+
+    // [{"dye": "AF488", "concentration": "10 uM"}, {"dye": "...", "concentration": "0.1 g/L", "molar_mass": "643.4 g/mol"},
+    //  {"dye": "AF488", "grid": "AF488", "grid_units": "uM"}]
+    std::vector<DyeEntry> loadDyes(const Node& n) {
         if (!n.raw().is_array()) n.fail("expected an array of dyes");
         if (!dyes_) n.fail("no dye database is available to this loader");
-        std::vector<DyeComponent> out;
+        std::vector<DyeEntry> out;
         for (size_t i = 0; i < n.size(); ++i) {
             const Node d = n.at(i);
-            d.allowOnly({"dye", "concentration", "molar_mass", "extinction_peak_M-1cm-1", "quantum_yield"});
+            d.allowOnly({"dye", "concentration", "grid", "grid_units", "molar_mass", "extinction_peak_M-1cm-1", "quantum_yield"});
             const std::optional<double> epsilon =
                 d.has("extinction_peak_M-1cm-1") ? std::optional(d.at("extinction_peak_M-1cm-1").number(0, 1e7, true)) : std::nullopt;
             const std::optional<double> qy = d.has("quantum_yield") ? std::optional(d.at("quantum_yield").number(0, 1)) : std::nullopt;
@@ -356,7 +463,13 @@ private:
             } catch (const Error& e) {
                 d.at("dye").fail(e.what());
             }
-            out.push_back({*dye, concentration(d)});
+            if (d.has("grid")) {
+                if (d.has("concentration")) d.at("concentration").fail("give either \"concentration\" or \"grid\", not both");
+                out.push_back({{*dye, 0.0}, d.at("grid").str(), d.at("grid"), d});
+            } else {
+                if (d.has("grid_units")) d.at("grid_units").fail("\"grid_units\" needs \"grid\"");
+                out.push_back({{*dye, concentration(d)}, std::nullopt, std::nullopt, d});
+            }
         }
         return out;
     }

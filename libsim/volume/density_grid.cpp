@@ -1,0 +1,265 @@
+#include "volume/density_grid.h"
+
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+#include <nanovdb/util/OpenToNanoVDB.h>
+#include <nanovdb/util/SampleFromVoxels.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <mutex>
+#include <sstream>
+#include <vector>
+
+#include "core/errors.h"
+
+namespace fluorosim {
+
+Affine Affine::scaling(double s) {
+    Affine a;
+    for (int i = 0; i < 3; ++i) a.m[i][i] = s;
+    return a;
+}
+
+Affine Affine::translation(const Vec3& t) {
+    Affine a;
+    a.t = t;
+    return a;
+}
+
+double Affine::determinant() const {
+    return m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+           m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+}
+
+Affine Affine::inverse() const {
+    const double det = determinant();
+    if (!(std::abs(det) > 0) || !std::isfinite(det)) throw NumericError("singular volume transform");
+    Affine r;
+    r.m[0][0] = (m[1][1] * m[2][2] - m[1][2] * m[2][1]) / det;
+    r.m[0][1] = (m[0][2] * m[2][1] - m[0][1] * m[2][2]) / det;
+    r.m[0][2] = (m[0][1] * m[1][2] - m[0][2] * m[1][1]) / det;
+    r.m[1][0] = (m[1][2] * m[2][0] - m[1][0] * m[2][2]) / det;
+    r.m[1][1] = (m[0][0] * m[2][2] - m[0][2] * m[2][0]) / det;
+    r.m[1][2] = (m[0][2] * m[1][0] - m[0][0] * m[1][2]) / det;
+    r.m[2][0] = (m[1][0] * m[2][1] - m[1][1] * m[2][0]) / det;
+    r.m[2][1] = (m[0][1] * m[2][0] - m[0][0] * m[2][1]) / det;
+    r.m[2][2] = (m[0][0] * m[1][1] - m[0][1] * m[1][0]) / det;
+    r.t = -r.applyLinear(t);
+    return r;
+}
+
+Affine Affine::then(const Affine& outer) const {
+    Affine r;
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+            double s = 0;
+            for (int k = 0; k < 3; ++k) s += outer.m[i][k] * m[k][j];
+            r.m[i][j] = s;
+        }
+    r.t = outer.apply(t);
+    return r;
+}
+
+struct DensityGrid::Impl {
+    std::string name, file;
+    Affine worldFromIndex;
+    GridMetadata metadata;
+    nanovdb::GridHandle<nanovdb::HostBuffer> handle;
+    const nanovdb::FloatGrid* grid = nullptr;
+    std::vector<std::pair<IndexBox, double>> blocks;
+    IndexBox bounds;
+    double background = 0, maxValue = 0;
+    uint64_t activeVoxels = 0;
+};
+
+namespace {
+
+void initializeOpenVdb() {
+    static std::once_flag once;
+    std::call_once(once, [] { openvdb::initialize(); });
+}
+
+IndexBox toIndexBox(const openvdb::CoordBBox& b) {
+    return {{b.min().x(), b.min().y(), b.min().z()}, {b.max().x(), b.max().y(), b.max().z()}};
+}
+
+std::string coordText(const openvdb::Coord& c) {
+    std::ostringstream s;
+    s << "(" << c.x() << ", " << c.y() << ", " << c.z() << ")";
+    return s.str();
+}
+
+std::string stringMeta(const openvdb::GridBase& grid, const char* key) {
+    const auto meta = grid[key];
+    return meta && meta->typeName() == openvdb::StringMetadata::staticTypeName() ? meta->str() : std::string();
+}
+
+openvdb::FloatGrid::Ptr labelsAsFloats(const openvdb::Int32Grid& labels) {
+    auto out = openvdb::FloatGrid::create(static_cast<float>(labels.background()));
+    out->setTransform(labels.transform().copy());
+    auto acc = out->getAccessor();
+    for (auto it = labels.cbeginValueOn(); it; ++it) {
+        if (it.isVoxelValue()) acc.setValue(it.getCoord(), static_cast<float>(*it));
+        else {
+            openvdb::CoordBBox b;
+            it.getBoundingBox(b);
+            out->fill(b, static_cast<float>(*it), true);
+        }
+    }
+    return out;
+}
+
+DensityGrid fromOpenVdb(std::shared_ptr<DensityGrid::Impl> impl, const openvdb::FloatGrid::Ptr& grid, const std::string& where);
+
+}  // namespace
+
+DensityGrid DensityGrid::read(const std::string& file, const std::string& gridName, bool allowIntegers) {
+    initializeOpenVdb();
+    if (!std::filesystem::exists(file)) throw IoError(file + ": no such file");
+    auto impl = std::make_shared<Impl>();
+    impl->name = gridName;
+    impl->file = file;
+    openvdb::GridBase::Ptr base;
+    std::vector<std::string> names;
+    try {
+        openvdb::io::File f(file);
+        f.open(false);
+        for (auto it = f.beginName(); it != f.endName(); ++it) names.push_back(it.gridName());
+        if (names.empty()) throw ConfigError(file + ": the file holds no grids");
+        if (std::find(names.begin(), names.end(), gridName) == names.end()) {
+            std::string list;
+            for (const auto& n : names) list += (list.empty() ? "\"" : ", \"") + n + "\"";
+            throw ConfigError(file + ": no grid named \"" + gridName + "\" (the file has " + list + ")");
+        }
+        base = f.readGrid(gridName);
+        f.close();
+    } catch (const openvdb::Exception& e) {
+        throw IoError(file + ": cannot read as an OpenVDB file: " + e.what());
+    }
+    const std::string where = file + ": grid \"" + gridName + "\"";
+    openvdb::FloatGrid::Ptr grid = openvdb::gridPtrCast<openvdb::FloatGrid>(base);
+    if (!grid && allowIntegers)
+        if (const auto labels = openvdb::gridPtrCast<openvdb::Int32Grid>(base)) grid = labelsAsFloats(*labels);
+    if (!grid)
+        throw ConfigError(where + " has type " + base->valueType() + "; expected float" + (allowIntegers ? " or int32" : ""));
+    return fromOpenVdb(std::move(impl), grid, where);
+}
+
+namespace {
+
+DensityGrid fromOpenVdb(std::shared_ptr<DensityGrid::Impl> impl, const openvdb::FloatGrid::Ptr& grid, const std::string& where) {
+    if (!grid->transform().isLinear()) throw ConfigError(where + " has a non-linear (frustum) transform, which is not supported");
+    const openvdb::Mat4d M = grid->transform().baseMap()->getAffineMap()->getMat4();
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) impl->worldFromIndex.m[i][j] = M(j, i);  // OpenVDB multiplies row vectors
+        impl->worldFromIndex.t[i] = M(3, i);
+    }
+    impl->metadata = {stringMeta(*grid, "units"), stringMeta(*grid, "length_unit")};
+
+    const auto& tree = grid->tree();
+    impl->background = tree.background();
+    if (!std::isfinite(impl->background) || impl->background < 0)
+        throw ConfigError(where + " has background value " + std::to_string(impl->background) + "; it must be finite and >= 0");
+    impl->maxValue = impl->background;
+    for (auto it = tree.cbeginValueAll(); it; ++it) {
+        const float v = *it;
+        if (!std::isfinite(v) || v < 0)
+            throw ConfigError(where + " has value " + std::to_string(v) + " at voxel " + coordText(it.getCoord()) +
+                              "; values must be finite and >= 0");
+        impl->maxValue = std::max(impl->maxValue, double(v));
+        if (!it.isVoxelValue() && v > impl->background) {
+            openvdb::CoordBBox b;
+            it.getBoundingBox(b);
+            impl->blocks.push_back({toIndexBox(b), v});
+        }
+    }
+    for (auto leaf = tree.cbeginLeaf(); leaf; ++leaf) {
+        float mx = 0;
+        for (openvdb::Index i = 0; i < openvdb::FloatTree::LeafNodeType::SIZE; ++i) mx = std::max(mx, leaf->getValue(i));
+        if (mx > impl->background) impl->blocks.push_back({toIndexBox(leaf->getNodeBoundingBox()), mx});
+    }
+    for (const auto& [b, v] : impl->blocks) {
+        if (impl->bounds.empty()) impl->bounds = b;
+        for (int a = 0; a < 3; ++a) {
+            impl->bounds.lo[a] = std::min(impl->bounds.lo[a], b.lo[a]);
+            impl->bounds.hi[a] = std::max(impl->bounds.hi[a], b.hi[a]);
+        }
+    }
+    impl->activeVoxels = tree.activeVoxelCount();
+    impl->handle = nanovdb::openToNanoVDB(*grid);
+    impl->grid = impl->handle.grid<float>();
+    if (!impl->grid) throw Error(where + ": NanoVDB conversion failed");
+    return DensityGrid(std::move(impl));
+}
+
+openvdb::FloatGrid::Ptr makeGrid(const std::string& name, const IndexBox& box, const Affine& worldFromIndex,
+                                 const std::function<double(int, int, int)>& value, const GridMetadata& metadata) {
+    auto grid = openvdb::FloatGrid::create(0.0f);
+    grid->setName(name);
+    openvdb::Mat4d M = openvdb::Mat4d::identity();
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) M(j, i) = worldFromIndex.m[i][j];
+        M(3, i) = worldFromIndex.t[i];
+    }
+    grid->setTransform(openvdb::math::Transform::createLinearTransform(M));
+    if (!metadata.units.empty()) grid->insertMeta("units", openvdb::StringMetadata(metadata.units));
+    if (!metadata.lengthUnit.empty()) grid->insertMeta("length_unit", openvdb::StringMetadata(metadata.lengthUnit));
+    auto acc = grid->getAccessor();
+    for (int i = box.lo[0]; i <= box.hi[0]; ++i)
+        for (int j = box.lo[1]; j <= box.hi[1]; ++j)
+            for (int k = box.lo[2]; k <= box.hi[2]; ++k) {
+                const double v = value(i, j, k);
+                if (v != 0) acc.setValue(openvdb::Coord(i, j, k), static_cast<float>(v));
+            }
+    return grid;
+}
+
+}  // namespace
+
+DensityGrid DensityGrid::fromVoxels(const std::string& name, const IndexBox& box, const Affine& worldFromIndex,
+                                    const std::function<double(int, int, int)>& value, GridMetadata metadata) {
+    initializeOpenVdb();
+    auto impl = std::make_shared<Impl>();
+    impl->name = name;
+    impl->file = "(in memory)";
+    return fromOpenVdb(std::move(impl), makeGrid(name, box, worldFromIndex, value, metadata), "grid \"" + name + "\"");
+}
+
+void writeVoxelGrids(const std::string& file, const Affine& worldFromIndex, const std::vector<VoxelGridSpec>& grids) {
+    initializeOpenVdb();
+    openvdb::GridPtrVec out;
+    for (const auto& g : grids) out.push_back(makeGrid(g.name, g.box, worldFromIndex, g.value, g.metadata));
+    try {
+        openvdb::io::File(file).write(out);
+    } catch (const openvdb::Exception& e) {
+        throw IoError(file + ": cannot write: " + e.what());
+    }
+}
+
+double DensityGrid::value(const Vec3& p, Interpolation interpolation) const {
+    const auto acc = impl_->grid->getAccessor();
+    if (interpolation == Interpolation::Nearest) {
+        const nanovdb::SampleFromVoxels<decltype(acc), 0, false> s(acc);
+        return s(nanovdb::Vec3d(p.x, p.y, p.z));
+    }
+    const nanovdb::SampleFromVoxels<decltype(acc), 1, false> s(acc);
+    return s(nanovdb::Vec3d(p.x, p.y, p.z));
+}
+
+void DensityGrid::forEachBlock(const std::function<void(const IndexBox&, double)>& callback) const {
+    for (const auto& [b, v] : impl_->blocks) callback(b, v);
+}
+
+const std::string& DensityGrid::name() const { return impl_->name; }
+const std::string& DensityGrid::file() const { return impl_->file; }
+const Affine& DensityGrid::worldFromIndex() const { return impl_->worldFromIndex; }
+const GridMetadata& DensityGrid::metadata() const { return impl_->metadata; }
+IndexBox DensityGrid::bounds() const { return impl_->bounds; }
+double DensityGrid::background() const { return impl_->background; }
+double DensityGrid::maxValue() const { return impl_->maxValue; }
+uint64_t DensityGrid::activeVoxelCount() const { return impl_->activeVoxels; }
+size_t DensityGrid::memoryBytes() const { return impl_->handle.size() + impl_->blocks.size() * sizeof(impl_->blocks[0]); }
+
+}  // namespace fluorosim

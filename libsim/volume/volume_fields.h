@@ -1,0 +1,82 @@
+#pragma once
+// The spatially varying scalar fields of one medium (dye concentrations, tissue scattering and
+// absorption scales), each value_c(p) = offset_c + scale_c * grid_c(p), and their majorant grid: coarse
+// cells, each holding every channel's maximum over the cell, traversed along a ray by a 3-D DDA
+// (Amanatides and Woo) so that empty and dim space costs one segment per cell.
+#include <optional>
+#include <vector>
+
+#include "core/vec3.h"
+#include "volume/density_grid.h"
+
+namespace fluorosim {
+
+struct VolumeChannel {
+    std::optional<DensityGrid> grid;  // none: the channel is the constant `offset`
+    double scale = 1, offset = 0;
+};
+
+struct MajorantGridOptions {
+    // Cell edge in voxels; 0 picks it so the longest axis has `targetCells` cells; -1 makes one global
+    // cell over the whole grid (the loosest majorant, for tests and benchmarks).
+    int cellVoxels = 0;
+    int targetCells = 64;
+    void validate() const;  // throws ConfigError
+};
+
+// One piece of a ray over which `maxValues` bounds every channel (maxValues[c] for channel c).
+struct MajorantCellSegment {
+    double tMin, tMax;
+    const double* maxValues;
+};
+
+class VolumeFields {
+public:
+    // Grids must share one index space (same transform in their file). `worldFromFile` maps the files'
+    // coordinates (already in mm) into the scene. Throws ConfigError.
+    VolumeFields(std::vector<VolumeChannel> channels, const Affine& worldFromFile, Interpolation interpolation,
+                 MajorantGridOptions majorants = {});
+
+    int channelCount() const { return static_cast<int>(channels_.size()); }
+    // Channel values at a world position, into out[channelCount()].
+    void values(const Vec3& pWorld, double* out) const;
+    const Affine& worldFromIndex() const { return worldFromIndex_; }
+    const Affine& indexFromWorld() const { return indexFromWorld_; }
+    std::array<int, 3> cellCounts() const { return cells_; }
+    // Each channel's largest value anywhere (over the cells and outside the grid).
+    std::vector<double> channelMaxima() const;
+    size_t memoryBytes() const;  // grids and majorant cells
+
+    // The DDA. Segments cover [tMin, tMax) in order, with cells of the grid and, outside its domain,
+    // the channels' values far from every voxel.
+    class Traversal {
+    public:
+        std::optional<MajorantCellSegment> next();
+
+    private:
+        friend class VolumeFields;
+        const VolumeFields* f_ = nullptr;
+        double t_ = 0, tEnd_ = 0, tEnter_ = 0, tExit_ = 0;
+        int phase_ = 0;  // 0 before the domain, 1 in it, 2 after it, 3 done
+        std::array<int, 3> cell_{}, step_{};
+        std::array<double, 3> tNext_{}, tDelta_{};
+    };
+    Traversal traverse(const Ray& worldRay, double tMin, double tMax) const;
+
+private:
+    const double* cellMax(const std::array<int, 3>& c) const {
+        return &cellMax_[(static_cast<size_t>(c[2]) * cells_[1] + c[1]) * cells_[0] * channels_.size() +
+                         static_cast<size_t>(c[0]) * channels_.size()];
+    }
+
+    std::vector<VolumeChannel> channels_;
+    Interpolation interpolation_;
+    Affine worldFromIndex_, indexFromWorld_;
+    Vec3 domainLo_, domainHi_;      // index space
+    std::array<double, 3> cellSize_{};  // in voxels
+    std::array<int, 3> cells_{0, 0, 0};
+    std::vector<double> cellMax_;   // channel-minor
+    std::vector<double> outside_;   // values where every voxel is background
+};
+
+}  // namespace fluorosim
