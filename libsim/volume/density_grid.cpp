@@ -230,7 +230,19 @@ DensityGrid DensityGrid::fromVoxels(const std::string& name, const IndexBox& box
 void writeVoxelGrids(const std::string& file, const Affine& worldFromIndex, const std::vector<VoxelGridSpec>& grids) {
     initializeOpenVdb();
     openvdb::GridPtrVec out;
-    for (const auto& g : grids) out.push_back(makeGrid(g.name, g.box, worldFromIndex, g.value, g.metadata));
+    for (const auto& g : grids) {
+        auto grid = makeGrid(g.name, g.box, worldFromIndex, g.value, g.metadata);
+        if (!g.integers) {
+            out.push_back(grid);
+            continue;
+        }
+        auto labels = openvdb::Int32Grid::create(0);
+        labels->setName(g.name);
+        labels->setTransform(grid->transform().copy());
+        auto acc = labels->getAccessor();
+        for (auto it = grid->cbeginValueOn(); it; ++it) acc.setValue(it.getCoord(), static_cast<int32_t>(*it));
+        out.push_back(labels);
+    }
     try {
         openvdb::io::File(file).write(out);
     } catch (const openvdb::Exception& e) {

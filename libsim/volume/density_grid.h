@@ -83,6 +83,7 @@ struct VoxelGridSpec {
     IndexBox box;
     std::function<double(int, int, int)> value;
     GridMetadata metadata;
+    bool integers = false;  // an Int32 grid (labels) instead of a float grid
 };
 void writeVoxelGrids(const std::string& file, const Affine& worldFromIndex, const std::vector<VoxelGridSpec>& grids);
 

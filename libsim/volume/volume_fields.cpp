@@ -61,13 +61,15 @@ VolumeFields::VolumeFields(std::vector<VolumeChannel> channels, const Affine& wo
     if (bounds.empty()) return;  // no voxel differs from the background: the outside values hold everywhere
 
     // Trilinear lookups at p read voxels floor(p) and floor(p) + 1, so values other than the background
-    // live in [lo - 1, hi + 1), and a cell [x0, x0 + B) reads voxels x0 .. x0 + B.
+    // live in [lo - 1, hi + 1), and a cell [x0, x0 + B) reads voxels x0 .. x0 + B. Both are widened by
+    // one voxel so that a point rounded across a cell or domain boundary (positions are computed from
+    // t) is still bounded by the segment that holds its t.
     int64_t extent[3];
     int64_t longest = 0;
     for (int a = 0; a < 3; ++a) {
-        domainLo_[a] = bounds.lo[a] - 1.0;
-        domainHi_[a] = bounds.hi[a] + 1.0;
-        extent[a] = int64_t(bounds.hi[a]) - bounds.lo[a] + 2;
+        domainLo_[a] = bounds.lo[a] - 2.0;
+        domainHi_[a] = bounds.hi[a] + 2.0;
+        extent[a] = int64_t(bounds.hi[a]) - bounds.lo[a] + 4;
         longest = std::max(longest, extent[a]);
     }
     int64_t cell = majorants.cellVoxels;
@@ -91,9 +93,9 @@ VolumeFields::VolumeFields(std::vector<VolumeChannel> channels, const Affine& wo
             int lo[3], hi[3];
             for (int a = 0; a < 3; ++a) {
                 const int64_t size = static_cast<int64_t>(cellSize_[a]);
-                const int64_t origin = bounds.lo[a] - 1;
-                lo[a] = std::max(0, floorDiv(b.lo[a] - origin - 1, size));
-                hi[a] = std::min(cells_[a] - 1, floorDiv(b.hi[a] - origin, size));
+                const int64_t origin = bounds.lo[a] - 2;
+                lo[a] = std::max(0, floorDiv(b.lo[a] - origin - 2, size));
+                hi[a] = std::min(cells_[a] - 1, floorDiv(b.hi[a] - origin + 1, size));
             }
             const double v = ch.offset + ch.scale * maxValue;
             for (int k = lo[2]; k <= hi[2]; ++k)

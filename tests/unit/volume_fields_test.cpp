@@ -1,0 +1,191 @@
+// The volume module: reading and validating OpenVDB grids, and the majorant grid's DDA. The DDA is
+// checked as a property: along random rays (including rays that start exactly on cell and grid
+// boundaries, axis-aligned and grazing rays, a grid far from the origin and one with 50 nm voxels),
+// its segments tile [tMin, tMax) without gaps and bound every channel at every point.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+#include "core/errors.h"
+#include "core/rng.h"
+#include "volume/volume_fields.h"
+
+namespace fluorosim {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path tempFile(const std::string& name) {
+    const fs::path dir = fs::temp_directory_path() / "fluorosim_volume_test";
+    fs::create_directories(dir);
+    return dir / name;
+}
+
+Affine voxels(double size, const Vec3& origin = Vec3()) { return Affine::scaling(size).then(Affine::translation(origin)); }
+
+// A sparse, high-contrast field: a one-voxel-thick sheet at k = 7, a dense blob, and empty space.
+double sparseField(int i, int j, int k) {
+    if (k == 7 && i >= 0 && i < 40 && j >= 0 && j < 40) return 1e6;
+    const double r2 = (i - 20.0) * (i - 20) + (j - 25.0) * (j - 25) + (k - 30.0) * (k - 30);
+    return r2 < 64 ? 1.0 + 0.01 * r2 : 0.0;
+}
+
+void expectDdaBounds(const VolumeFields& f, const Ray& ray, double tMin, double tMax, Rng& rng) {
+    auto tr = f.traverse(ray, tMin, tMax);
+    double t = tMin;
+    int segments = 0;
+    std::vector<double> v(static_cast<size_t>(f.channelCount()));
+    while (const auto s = tr.next()) {
+        ASSERT_NEAR(s->tMin, t, 1e-9 * std::max(1.0, std::abs(t))) << "gap or overlap before segment " << segments;
+        ASSERT_GE(s->tMax, s->tMin);
+        for (int n = 0; n < 8; ++n) {
+            const double u = n == 0 ? 0.0 : (n == 1 ? 0.999999 : rng.uniform());
+            const double tt = s->tMin + u * (s->tMax - s->tMin);
+            if (!std::isfinite(tt)) continue;
+            f.values(ray.at(tt), v.data());
+            for (int c = 0; c < f.channelCount(); ++c)
+                ASSERT_LE(v[c], s->maxValues[c] * (1 + 1e-6)) << "channel " << c << " at t = " << tt << " in segment " << segments;
+        }
+        t = s->tMax;
+        ++segments;
+        ASSERT_LT(segments, 1000000);
+    }
+    EXPECT_NEAR(t, tMax, 1e-9 * std::max(1.0, std::abs(tMax)));
+}
+
+VolumeFields sparseFields(double voxel, const Vec3& origin, int cellVoxels) {
+    const DensityGrid g = DensityGrid::fromVoxels("sparse", {{-2, -2, -2}, {45, 45, 45}}, voxels(voxel, origin), sparseField);
+    std::vector<VolumeChannel> ch(2);
+    ch[0].grid = g;
+    ch[0].scale = 2.0;
+    ch[1].offset = 0.5;  // a constant channel
+    return VolumeFields(std::move(ch), Affine(), Interpolation::Trilinear, {cellVoxels});
+}
+
+TEST(MajorantGrid, DdaSegmentsTileTheRayAndBoundEveryChannel) {
+    for (int cell : {-1, 0, 1, 3, 8}) {
+        for (const auto& [voxel, origin] : {std::pair{0.01, Vec3()}, std::pair{5e-4, Vec3(100, -100, 100)}, std::pair{5e-5, Vec3(0.1, 0, 0)}}) {
+            const VolumeFields f = sparseFields(voxel, origin, cell);
+            Rng rng(11, static_cast<uint64_t>(cell + 2));
+            const Vec3 centre = f.worldFromIndex().apply(Vec3(20, 20, 20));
+            const double size = 60 * voxel;
+            for (int r = 0; r < 300; ++r) {
+                Vec3 o = centre + Vec3(rng.uniform() - 0.5, rng.uniform() - 0.5, rng.uniform() - 0.5) * (2 * size);
+                Vec3 d = normalize(Vec3(rng.uniform() - 0.5, rng.uniform() - 0.5, rng.uniform() - 0.5));
+                if (r % 5 == 0) d = Vec3(r % 3 == 0, r % 3 == 1, r % 3 == 2);  // axis-aligned
+                if (r % 7 == 0) d = normalize(Vec3(1, 0.3, 1e-3));              // grazing the one-voxel sheet
+                // Start exactly on a voxel (and so a cell) boundary in index space.
+                if (r % 4 == 0) o = f.worldFromIndex().apply(Vec3(std::round(rng.uniform() * 40) - 0.0, 7, std::round(rng.uniform() * 40)));
+                expectDdaBounds(f, Ray{o, d}, 0.0, 3 * size, rng);
+                if (HasFatalFailure()) {
+                    ADD_FAILURE() << "cell " << cell << ", voxel " << voxel << ", ray " << r;
+                    return;
+                }
+            }
+        }
+    }
+}
+
+TEST(MajorantGrid, FinerCellsAreTighterAndTheGlobalCellIsTheMaximum) {
+    const VolumeFields global = sparseFields(0.01, Vec3(), -1), fine = sparseFields(0.01, Vec3(), 4);
+    EXPECT_EQ(global.cellCounts(), (std::array<int, 3>{1, 1, 1}));
+    const auto gmax = global.channelMaxima();
+    EXPECT_DOUBLE_EQ(gmax[0], 2e6);
+    EXPECT_DOUBLE_EQ(gmax[1], 0.5);
+    // A ray through the blob only, far from the sheet: the fine grid's majorant there is about 2 (the
+    // blob), the global one 2e6.
+    auto tr = fine.traverse(Ray{fine.worldFromIndex().apply(Vec3(-5, 25, 30)), Vec3(1, 0, 0)}, 0.0, 1.0);
+    double largest = 0;
+    while (const auto s = tr.next()) largest = std::max(largest, s->maxValues[0]);
+    EXPECT_GT(largest, 1.9);
+    EXPECT_LT(largest, 2.0 * (1 + 0.01 * 64) + 1e-9);
+}
+
+TEST(MajorantGrid, AllZeroGridHasNoDomain) {
+    const DensityGrid g = DensityGrid::fromVoxels("zero", {{0, 0, 0}, {9, 9, 9}}, voxels(0.1), [](int, int, int) { return 0.0; });
+    std::vector<VolumeChannel> ch(1);
+    ch[0].grid = g;
+    const VolumeFields f(std::move(ch), Affine(), Interpolation::Trilinear);
+    auto tr = f.traverse(Ray{Vec3(-1, 0.5, 0.5), Vec3(1, 0, 0)}, 0.0, 3.0);
+    const auto s = tr.next();
+    ASSERT_TRUE(s);
+    EXPECT_EQ(s->maxValues[0], 0.0);
+    EXPECT_EQ(s->tMax, 3.0);
+    EXPECT_FALSE(tr.next());
+}
+
+TEST(DensityGrid, InterpolationIsTrilinearOrNearest) {
+    const DensityGrid g = DensityGrid::fromVoxels("ramp", {{0, 0, 0}, {3, 3, 3}}, voxels(1.0), [](int i, int, int) { return 1.0 + i; });
+    EXPECT_NEAR(g.value(Vec3(1.25, 1, 1), Interpolation::Trilinear), 2.25, 1e-6);
+    EXPECT_NEAR(g.value(Vec3(1.25, 1, 1), Interpolation::Nearest), 2.0, 1e-6);
+    EXPECT_NEAR(g.value(Vec3(1.75, 1, 1), Interpolation::Nearest), 3.0, 1e-6);
+}
+
+std::string readError(const fs::path& file, const std::string& grid, bool labels = false) {
+    try {
+        (void)DensityGrid::read(file.string(), grid, labels);
+    } catch (const Error& e) {
+        return e.what();
+    }
+    return "(no error)";
+}
+
+TEST(DensityGrid, BadVoxelsAreRejectedWithGridNameAndCoordinate) {
+    const fs::path file = tempFile("bad_voxels.vdb");
+    auto bad = [](double v) {
+        return [v](int i, int j, int k) { return (i == 3 && j == 4 && k == 5) ? v : 1.0; };
+    };
+    writeVoxelGrids(file.string(), voxels(0.1),
+                    {{"nan", {{0, 0, 0}, {7, 7, 7}}, bad(std::nan(""))},
+                     {"inf", {{0, 0, 0}, {7, 7, 7}}, bad(INFINITY)},
+                     {"negative", {{0, 0, 0}, {7, 7, 7}}, bad(-2.0)},
+                     {"labels", {{0, 0, 0}, {7, 7, 7}}, [](int, int, int) { return 3.0; }, {}, true}});
+    for (const char* name : {"nan", "inf", "negative"}) {
+        const std::string e = readError(file, name);
+        EXPECT_NE(e.find(std::string("grid \"") + name + "\""), std::string::npos) << e;
+        EXPECT_NE(e.find("(3, 4, 5)"), std::string::npos) << e;
+        EXPECT_NE(e.find(file.string()), std::string::npos) << e;
+    }
+    EXPECT_NE(readError(file, "negative").find("-2"), std::string::npos);
+    // Wrong type, then accepted as labels.
+    const std::string wrongType = readError(file, "labels");
+    EXPECT_NE(wrongType.find("int32"), std::string::npos) << wrongType;
+    EXPECT_NE(wrongType.find("expected float"), std::string::npos) << wrongType;
+    EXPECT_NEAR(DensityGrid::read(file.string(), "labels", true).value(Vec3(2, 2, 2), Interpolation::Nearest), 3.0, 0);
+    // A missing grid lists the ones present.
+    const std::string missing = readError(file, "AF488");
+    EXPECT_NE(missing.find("no grid named \"AF488\""), std::string::npos) << missing;
+    EXPECT_NE(missing.find("\"negative\""), std::string::npos) << missing;
+}
+
+TEST(DensityGrid, MissingEmptyAndForeignFilesGiveClearErrors) {
+    EXPECT_THROW((void)DensityGrid::read(tempFile("does_not_exist.vdb").string(), "x"), IoError);
+    EXPECT_NE(readError(tempFile("does_not_exist.vdb"), "x").find("no such file"), std::string::npos);
+    const fs::path empty = tempFile("empty.vdb");
+    std::ofstream(empty).close();
+    EXPECT_THROW((void)DensityGrid::read(empty.string(), "x"), IoError);
+    const fs::path text = tempFile("text.vdb");
+    std::ofstream(text) << "not a volume\n";
+    EXPECT_NE(readError(text, "x").find("cannot read as an OpenVDB file"), std::string::npos) << readError(text, "x");
+    const fs::path noGrids = tempFile("no_grids.vdb");
+    writeVoxelGrids(noGrids.string(), voxels(1), {});
+    EXPECT_NE(readError(noGrids, "x").find("holds no grids"), std::string::npos) << readError(noGrids, "x");
+}
+
+TEST(VolumeFields, GridsOfOneMediumMustShareTheirVoxels) {
+    const auto one = [](int, int, int) { return 1.0; };
+    std::vector<VolumeChannel> ch(2);
+    ch[0].grid = DensityGrid::fromVoxels("a", {{0, 0, 0}, {3, 3, 3}}, voxels(0.1), one);
+    ch[1].grid = DensityGrid::fromVoxels("b", {{0, 0, 0}, {3, 3, 3}}, voxels(0.2), one);
+    try {
+        VolumeFields f(std::move(ch), Affine(), Interpolation::Trilinear);
+        FAIL() << "no error";
+    } catch (const ConfigError& e) {
+        EXPECT_NE(std::string(e.what()).find("different transform"), std::string::npos) << e.what();
+    }
+}
+
+}  // namespace
+}  // namespace fluorosim
