@@ -29,8 +29,7 @@ int PathTracer::mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const
 
 SampledSpectrum PathTracer::transmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl, Rng& rng,
                                          const Vec3* surfaceNormal, double surfaceEpsilon) const {
-    const TransmittanceEstimate e = estimateTransmittance(p0, p1, medium, wl, rng, surfaceNormal, surfaceEpsilon);
-    return e.T ? e.T / e.r_l.average() : e.T;
+    return estimateTransmittance(p0, p1, medium, wl, rng, surfaceNormal, surfaceEpsilon).T;
 }
 
 PathTracer::TransmittanceEstimate PathTracer::estimateTransmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl,
@@ -56,9 +55,15 @@ PathTracer::TransmittanceEstimate PathTracer::estimateTransmittance(const Vec3& 
             const Medium& med = scene_.media[static_cast<size_t>(medium)];
             const MediumSpectra spec = med.spectra(wl);
             if (med.isHomogeneous()) {
-                // The exact transmittance, with no sampling noise.
+                // The exact transmittance, with no sampling noise. Ratio tracking against the exact
+                // majorant would return T/T[0] with probability T[0], and the same ratio in r_u and r_l;
+                // this is its expectation, so spectral MIS sees the same pdf ratios.
                 const MediumSample m = spec.at(med.channelMax().data());
-                e.T *= expNeg((m.sigmaA + m.sigmaS) * segment);
+                const SampledSpectrum T = expNeg((m.sigmaA + m.sigmaS) * segment);
+                if (!(T[0] > 0)) return {SampledSpectrum(0.0), e.r_u, e.r_l};
+                e.T *= T;
+                e.r_u *= T / T[0];
+                e.r_l *= T / T[0];
             } else if (!ratioTrack(med, spec, r, segment, rng, e)) {
                 return {SampledSpectrum(0.0), e.r_u, e.r_l};
             }
@@ -284,10 +289,17 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                 for (int j = 0; j < kNumWavelengths; ++j) b[j] = std::min(b[j], std::max(sigmaT[j], 1.0));
                 return b;
             };
+            // The majorant is the sum of two independent processes: tracking (bound sigmaTBar on σt, as
+            // in pbrt) and branch points (bound sigmaBBar on the branch density). Each tentative collision
+            // belongs to one of them with probability proportional to its rate. Branch-process points are
+            // auxiliary: they change beta, r_u and r_l alike, so the MIS weights against next-event
+            // estimation (which ratio-tracks the tracking process only) still sum to one.
+            SampledSpectrum sigmaBBar(0.0);  // of the segment being sampled
             auto majorants = med.majorants(ray, 0.0, tMax, [&](const double* m) {
                 const MediumSample s = spec.at(m);
-                const SampledSpectrum sigmaT = s.sigmaA + s.sigmaS;
-                return sigmaT + branchDensity(m, sigmaT);
+                const SampledSpectrum sigmaTBar = s.sigmaA + s.sigmaS;
+                sigmaBBar = branchDensity(m, sigmaTBar);
+                return sigmaTBar + sigmaBBar;
             });
             ChannelValues ch;
             const SampledSpectrum T_maj = sampleTmaj<SampledSpectrum>(
@@ -295,18 +307,25 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                     ++stats.tentativeCollisions;
                     med.channelValues(ray.at(t), ch.data());
                     const MediumSample mp = spec.at(ch.data());
-                    if (dyed) {
+                    if (dyed && rng.uniform() * sigmaMaj[0] < sigmaBBar[0]) {
+                        // A branch-process point; it branches with probability sigmaB(p) / sigmaBBar.
                         const SampledSpectrum sigmaB = branchDensity(ch.data(), mp.sigmaA + mp.sigmaS);
-                        if (rng.uniform() * sigmaMaj[0] < sigmaB[0]) {
+                        if (rng.uniform() * sigmaBBar[0] < sigmaB[0]) {
                             const double pdf = Tm[0] * sigmaB[0];
                             const SampledSpectrum r_e = r_u * sigmaB * Tm / pdf;
                             if (r_e)
                                 Lf += fluorescence(ray.at(t), medium, ch.data(), wl, beta * Tm / (pdf * r_e.average()), rng, stats,
                                                    st.generation, depth);
                         }
+                        const SampledSpectrum ratio = Tm * sigmaBBar / (Tm[0] * sigmaBBar[0]);
+                        beta *= ratio;
+                        r_u *= ratio;
+                        r_l *= ratio;
+                        return bool(beta) && bool(r_u);
                     }
-                    const double pAbsorb = mp.sigmaA[0] / sigmaMaj[0];
-                    const double pScatter = mp.sigmaS[0] / sigmaMaj[0];
+                    const SampledSpectrum sigmaTBar = sigmaMaj - sigmaBBar;
+                    const double pAbsorb = mp.sigmaA[0] / sigmaTBar[0];
+                    const double pScatter = mp.sigmaS[0] / sigmaTBar[0];
                     const double pNull = std::max(0.0, 1.0 - pAbsorb - pScatter);
                     const std::array<double, 3> probs{pAbsorb, pScatter, pNull};
                     const int mode = sampleDiscrete(probs, rng.uniform());
@@ -331,13 +350,13 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                         }
                         return false;
                     }
-                    const SampledSpectrum sigmaN = clampZero(sigmaMaj - mp.sigmaA - mp.sigmaS);
+                    const SampledSpectrum sigmaN = clampZero(sigmaTBar - mp.sigmaA - mp.sigmaS);
                     const double pdf = Tm[0] * sigmaN[0];
                     if (pdf == 0) beta = SampledSpectrum(0.0);
                     else {
                         beta *= Tm * sigmaN / pdf;
                         r_u *= Tm * sigmaN / pdf;
-                        r_l *= Tm * sigmaMaj / pdf;
+                        r_l *= Tm * sigmaTBar / pdf;
                     }
                     return bool(beta) && bool(r_u);
                 });

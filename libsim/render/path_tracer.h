@@ -51,8 +51,8 @@ public:
     PathRadiance radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;
 
     // Transmittance from p0 to p1 through null interfaces and media; zero if a surface blocks. Exact in
-    // homogeneous media, a ratio-tracking estimate in grid media (unbiased at the hero wavelength, and
-    // at every wavelength whose coefficients are proportional to the hero's).
+    // homogeneous media, a ratio-tracking estimate in grid media: unbiased at every wavelength whose
+    // majorant is positive wherever the hero wavelength's is (the hero's free flights sample it).
     // When p0 lies on a surface, pass its normal so the ray leaves it without self-intersection.
     SampledSpectrum transmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl, Rng& rng,
                                   const Vec3* surfaceNormal = nullptr, double surfaceEpsilon = 0.0) const;

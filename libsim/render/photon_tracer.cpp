@@ -47,8 +47,6 @@ public:
             if (!std::holds_alternative<PointLight>(l)) throw ConfigError("the forward photon tracer supports point lights only");
             points_.push_back(&std::get<PointLight>(l));
         }
-        for (const Medium& m : scene_.media)
-            if (!m.isHomogeneous()) throw ConfigError("the forward photon tracer supports homogeneous media only (medium \"" + m.name() + "\")");
         if (points_.empty()) throw ConfigError("the forward photon tracer needs at least one point light");
     }
 
@@ -73,11 +71,25 @@ public:
             const auto hit = scene_.geometry.intersect(ph.ray, 0.0, std::numeric_limits<double>::infinity());
             if (ph.medium != kNone) {
                 const Medium& m = scene_.media[static_cast<size_t>(ph.medium)];
-                const double sa = m.absorptionAt(ph.lambda), ss = m.scatteringAt(ph.lambda);
-                const double st = sa + ss;
-                const double s = st > 0 ? -std::log(1 - rng.uniform()) / st : std::numeric_limits<double>::infinity();
-                if (!hit || s < hit->t) {
-                    if (!hit && !std::isfinite(s)) return;  // lost in an unbounded clear medium
+                // Analog delta tracking at the photon's one wavelength (exact sampling in a homogeneous medium).
+                const MediumSpectra spec = m.spectra(SampledWavelengths::atLine(ph.lambda, 1.0));
+                const double tHit = hit ? hit->t : std::numeric_limits<double>::infinity();
+                ChannelValues ch{};
+                double s = std::numeric_limits<double>::infinity();
+                auto majorants = m.majorants(ph.ray, 0.0, tHit, [&](const double* mx) {
+                    const MediumSample c = spec.at(mx);
+                    return c.sigmaA + c.sigmaS;
+                });
+                sampleTmaj<SampledSpectrum>(majorants, rng, [&](double t, const SampledSpectrum& sigmaMaj, const SampledSpectrum&) {
+                    m.channelValues(ph.ray.at(t), ch.data());
+                    const MediumSample c = spec.at(ch.data());
+                    if (rng.uniform() * sigmaMaj[0] >= c.sigmaA[0] + c.sigmaS[0]) return true;  // null collision
+                    s = t;
+                    return false;
+                });
+                if (std::isfinite(s)) {
+                    const MediumSample c = spec.at(ch.data());
+                    const double sa = c.sigmaA[0], ss = c.sigmaS[0], st = sa + ss;
                     const Vec3 p = ph.ray.at(s);
                     if (rng.uniform() * st < ss) {
                         double pdf = 0;
@@ -87,10 +99,10 @@ public:
                     // Absorbed: by which dye, if any?
                     double u = rng.uniform() * sa;
                     const Fluorophore* dye = nullptr;
-                    for (const DyeComponent& d : m.dyes()) {
-                        const double a = dyeAbsorption(d.dye, ph.lambda, d.molar);
+                    for (size_t i = 0; i < m.dyes().size(); ++i) {
+                        const double a = dyeAbsorption(m.dyes()[i].dye, ph.lambda, ch[kFirstDyeChannel + i]);
                         if (u < a) {
-                            dye = &d.dye;
+                            dye = &m.dyes()[i].dye;
                             break;
                         }
                         u -= a;
@@ -108,6 +120,7 @@ public:
                     if (ph.weight == 0) return;
                     continue;
                 }
+                if (!hit) return;  // lost in an unbounded medium
             }
             if (!hit) {
                 if (ph.fluorescent) {
