@@ -11,6 +11,7 @@ int main(int argc, char** argv) {
     app.require_subcommand(1);
     fluorosim::app::addRenderCommand(app);
     fluorosim::app::addValidateCommands(app);
+    fluorosim::app::addVoxelizeCommand(app);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
