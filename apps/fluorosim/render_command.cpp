@@ -32,6 +32,7 @@ struct RenderArgs {
     std::optional<uint64_t> seed;
     std::string fluorescence;
     double checkpointSeconds = 60;
+    std::string preview = "total";  // which light the PNG shows: total, elastic or fluorescent
 };
 
 void checkWritable(const fs::path& out) {
@@ -61,7 +62,8 @@ double autoExposure(const ExrImage& img) {
 }
 
 // Writes the EXR and the PNG preview next to it; returns the preview's path.
-fs::path writeOutputs(const fs::path& out, const Film& film, const Scene& scene, int sppDone, const RenderSummary* summary) {
+fs::path writeOutputs(const fs::path& out, const Film& film, const Scene& scene, int sppDone, const RenderSummary* summary,
+                      const std::string& preview) {
     ExrImage img = film.image(sppDone);
     img.attributes["fluorosim.spp"] = std::to_string(sppDone);
     img.attributes["fluorosim.seed"] = std::to_string(scene.render.seed);
@@ -73,8 +75,18 @@ fs::path writeOutputs(const fs::path& out, const Film& film, const Scene& scene,
     fs::rename(tmp, out);
     fs::path png = out;
     png.replace_extension(".png");
-    writePngPreview(png.string(), img.width, img.height, img.rgb, autoExposure(img));
+    const std::vector<float>* rgb = &img.rgb;
+    for (const RgbLayer& l : img.rgbLayers)
+        if (l.prefix == preview) rgb = &l.rgb;
+    ExrImage shown;
+    shown.rgb = *rgb;
+    writePngPreview(png.string(), img.width, img.height, *rgb, autoExposure(shown));
     return png;
+}
+
+double nullPerReal(const PathStats& st) {
+    const double real = static_cast<double>(st.scatteringEvents + st.absorptionEvents);
+    return real > 0 ? (static_cast<double>(st.tentativeCollisions) - real) / real : 0.0;
 }
 
 void runRender(const RenderArgs& a) {
@@ -108,7 +120,7 @@ void runRender(const RenderArgs& a) {
     opt.passFinished = [&](const Film& f, int sppDone) {
         const auto now = std::chrono::steady_clock::now();
         if (sppDone < opt.spp && std::chrono::duration<double>(now - lastCheckpoint).count() > a.checkpointSeconds) {
-            writeOutputs(out, f, scene, sppDone, nullptr);
+            writeOutputs(out, f, scene, sppDone, nullptr, a.preview);
             lastCheckpoint = now;
         }
     };
@@ -117,7 +129,7 @@ void runRender(const RenderArgs& a) {
     const RenderSummary s = render(scene, film, opt);
     bar.finish();
     if (s.sppCompleted == 0) throw Error("interrupted before the first pass finished; nothing written");
-    const fs::path png = writeOutputs(out, film, scene, s.sppCompleted, &s);
+    const fs::path png = writeOutputs(out, film, scene, s.sppCompleted, &s, a.preview);
     const double bounces = static_cast<double>(s.stats.scatteringEvents + s.stats.surfaceBounces) / std::max<double>(1.0, static_cast<double>(s.stats.paths));
     const nlohmann::json summary = {{"image", out.string()},
                                     {"preview", png.string()},
@@ -129,6 +141,9 @@ void runRender(const RenderArgs& a) {
                                     {"truncated_paths", s.stats.truncated},
                                     {"fluorescence", fluorescenceModelName(scene.render.fluorescence)},
                                     {"fluorescence_branches", s.stats.fluorescenceBranches},
+                                    {"tentative_collisions", s.stats.tentativeCollisions},
+                                    // Null (and branch-process) collisions per real one: the cost of the majorants.
+                                    {"null_per_real_collision", nullPerReal(s.stats)},
                                     {"cancelled", s.cancelled}};
     std::printf("%s\n", summary.dump().c_str());
     std::fflush(stdout);
@@ -152,6 +167,9 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_option("--fluorescence", args->fluorescence,
                     "Fluorescence model: full (unbiased, default), paper (Abdellah et al.: one event, direct light) or none");
     cmd->add_option("--checkpoint-seconds", args->checkpointSeconds, "Write the image every this many seconds");
+    cmd->add_option("--preview", args->preview,
+                    "What the PNG preview shows: total (default), elastic or fluorescent (the EXR always has all three)")
+        ->check(CLI::IsMember({"total", "elastic", "fluorescent"}));
     cmd->callback([args] { runRender(*args); });
 }
 

@@ -11,6 +11,7 @@ namespace {
 // trade more (rouletted) sub-paths for less variance. On the forward-comparison balls, 16 instead of
 // 1 cut the standard error about 3x at about the same run time; 8 keeps dense media cheaper.
 constexpr double kBranchBoost = 8.0;
+constexpr double kGridBranchesPerVoxel = 4.0;
 
 struct LightSpectra {
     std::vector<double> lines;
@@ -127,12 +128,23 @@ FluorescencePlan::FluorescencePlan(const Scene& scene)
             const DyeComponent& d = scene.media[m].dyes()[i];
             // Not weighted by Φ: the branch's weight carries Φ, so a dim dye would otherwise get fewer
             // branches for the same relative noise (measured: AF555, Φ = 0.1, had 5x the spectral noise).
-            const double weight = kBranchBoost * dyePeakAbsorption(d.dye, 1.0) / d.dye.emissionPdfMax();
+            // In a grid medium a labelled structure may be a voxel thick and weakly absorbing (a 1 µm
+            // dendrite at 10 µM has optical depth ~1e-4), so the density at the dye's largest
+            // concentration is at least kGridBranchesPerVoxel per voxel length: each crossing then
+            // branches, and the roulette in the tracer keeps the cost to what the branches carry.
+            double weight = kBranchBoost * dyePeakAbsorption(d.dye, 1.0);
+            if (const VolumeFields* v = scene.media[m].volume())
+                weight = std::max(weight, kGridBranchesPerVoxel / (v->voxelSizeMm() * maxMolar(scene.media[m], i)));
+            weight /= d.dye.emissionPdfMax();
             media_[m].dyes.push_back({&d.dye, kFirstDyeChannel + static_cast<int>(i), weight});
             anyDye = true;
         }
+    for (size_t m = 0; m < scene.media.size(); ++m)
+        if (const VolumeFields* v = scene.media[m].volume()) media_[m].branchCap = kGridBranchesPerVoxel / v->voxelSizeMm();
     active_ = active_ && anyDye;
 }
+
+double FluorescencePlan::branchDensityCap(int medium) const { return media_[static_cast<size_t>(medium)].branchCap; }
 
 double FluorescencePlan::branchDensity(int medium, const double* channels, double lambda) const {
     double sum = 0;

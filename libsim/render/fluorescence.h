@@ -31,6 +31,9 @@ public:
     // dye does not absorb at the camera's wavelength. Any positive choice is unbiased; this one follows
     // the emission shape and the dye's strength.
     double branchDensity(int medium, const double* channels, double lambda) const;
+    // The tracer uses min(branchDensity, max(σt, cap)): where the medium is dense its own collisions
+    // suffice. 1/mm in homogeneous media; 4 per voxel length in grid media.
+    double branchDensityCap(int medium) const;
 
     // Inelastic kernel in radiance units (1/(mm nm)) at a point with channel values `channels`:
     // Σ_i Φ_i f_i(λ) σa,i(λx; c_i) λx/λ. The factor λx/λ
@@ -51,6 +54,7 @@ private:
     };
     struct MediumTerms {
         std::vector<DyeTerm> dyes;  // only dyes that can emit
+        double branchCap = 1.0;     // 1/mm
     };
     FluorescenceModel model_;
     bool active_ = false;

@@ -279,14 +279,15 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                     unit[c] = 0;
                 }
             }
-            // Capped at max(σt, 1/mm): where the medium is already dense its real collisions are enough,
+            // Capped at max(σt, cap) (1/mm when homogeneous): where the medium is already dense its real collisions are enough,
             // and a concentrated dye (σa ~ 10^2-10^3 /mm) must not flood the path with branch points.
             // The same formula applied to a segment's channel maxima bounds it over the segment.
+            const double branchCap = dyed ? fluorescence_.branchDensityCap(medium) : 0.0;
             auto branchDensity = [&](const double* ch, const SampledSpectrum& sigmaT) {
                 SampledSpectrum b(0.0);
                 if (!dyed) return b;
                 for (int c = kFirstDyeChannel; c < spec.channels; ++c) b += branchPerChannel[c] * ch[c];
-                for (int j = 0; j < kNumWavelengths; ++j) b[j] = std::min(b[j], std::max(sigmaT[j], 1.0));
+                for (int j = 0; j < kNumWavelengths; ++j) b[j] = std::min(b[j], std::max(sigmaT[j], branchCap));
                 return b;
             };
             // The majorant is the sum of two independent processes: tracking (bound sigmaTBar on σt, as

@@ -116,6 +116,15 @@ void VolumeFields::values(const Vec3& pWorld, double* out) const {
     }
 }
 
+double VolumeFields::voxelSizeMm() const {
+    bool anyGrid = false;
+    for (const VolumeChannel& c : channels_) anyGrid = anyGrid || c.grid.has_value();
+    if (!anyGrid) return 1.0;
+    double shortest = std::numeric_limits<double>::infinity();
+    for (int a = 0; a < 3; ++a) shortest = std::min(shortest, length(worldFromIndex_.applyLinear(Vec3(a == 0, a == 1, a == 2))));
+    return shortest;
+}
+
 std::vector<double> VolumeFields::channelMaxima() const {
     std::vector<double> m = outside_;
     for (size_t i = 0; i < cellMax_.size(); ++i) m[i % m.size()] = std::max(m[i % m.size()], cellMax_[i]);

@@ -41,6 +41,8 @@ public:
     // Channel values at a world position, into out[channelCount()].
     void values(const Vec3& pWorld, double* out) const;
     const Affine& worldFromIndex() const { return worldFromIndex_; }
+    // The shortest voxel edge in world units (mm); 1 when there is no grid.
+    double voxelSizeMm() const;
     const Affine& indexFromWorld() const { return indexFromWorld_; }
     std::array<int, 3> cellCounts() const { return cells_; }
     // Each channel's largest value anywhere (over the cells and outside the grid).
