@@ -237,4 +237,21 @@ double WidefieldIllumination::irradiance(const Vec3& p, int side, double) const 
     return dot(radial, radial) <= radiusMm_ * radiusMm_ ? irradianceWPerMm2_ : 0.0;
 }
 
+std::shared_ptr<BeamProfile> makeLightSheet(const LightSheetSpec& spec) {
+    LightSheetOptions o;
+    o.wavelengthNm = spec.wavelengthNm;
+    o.spectrum = spec.spectrum;
+    o.powerMw = spec.powerMw;
+    o.propagation = spec.propagation;
+    o.normal = spec.normal;
+    o.centreMm = spec.centreMm;
+    o.waistMm = spec.waistMm;
+    o.illuminationNa = spec.illuminationNa;
+    o.heightMm = spec.heightMm;
+    o.refractiveIndex = spec.refractiveIndex;
+    o.mode = spec.scanned ? SheetMode::Scanned : SheetMode::Static;
+    o.sides = spec.dual ? SheetSides::Dual : SheetSides::Single;
+    return std::make_shared<LightSheet>(std::move(o));
+}
+
 }  // namespace fluorosim::optics

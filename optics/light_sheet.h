@@ -60,6 +60,7 @@
 #include <string>
 
 #include "core/vec3.h"
+#include "scene/beam.h"
 #include "spectral/spectrum.h"
 
 namespace fluorosim::optics {
@@ -87,10 +88,9 @@ double naFromWaist(double waistMm, double lambdaNm, double refractiveIndex);
 Spectrum normalisedIlluminationSpectrum(const std::optional<double>& wavelengthNm, const std::optional<Spectrum>& spectrum,
                                         const std::string& what);
 
-// Common interface of the illumination models, for the renderer.
-class Illumination {
+// Common interface of the illumination models; the renderer sees them as libsim's BeamProfile.
+class Illumination : public BeamProfile {
 public:
-    virtual ~Illumination() = default;
     // Number of beams (1, or 2 for a dual-sided sheet). Sides are 0 .. sides() − 1.
     virtual int sides() const = 0;
     // Unit direction in which the light of `side` travels. Throws ConfigError for a bad side.
@@ -153,7 +153,7 @@ public:
 
     // Moves the sheet along its normal to `normalOffsetMm` from the options' centre (absolute, not
     // cumulative): z-stacks step the sheet through the sample.
-    void moveTo(double normalOffsetMm);
+    void moveTo(double normalOffsetMm) override;
     double normalOffsetMm() const { return offsetMm_; }
     Vec3 centre() const { return centre_; }
     Vec3 propagationAxis() const { return u_; }
@@ -194,6 +194,7 @@ public:
     Vec3 direction(int side) const override;
     double irradiance(const Vec3& p, int side, double lambdaNm) const override;
     const Spectrum& spectrum() const override { return spectrum_; }
+    void moveTo(double) override {}  // widefield light fills the field at every depth
 
 private:
     WidefieldOptions options_;
@@ -202,5 +203,8 @@ private:
     double irradianceWPerMm2_ = 0;
     double radiusMm_ = 0;
 };
+
+// The scene loader's hook: a LightSheet from a scene file's light_sheet entry.
+std::shared_ptr<BeamProfile> makeLightSheet(const LightSheetSpec& spec);
 
 }  // namespace fluorosim::optics

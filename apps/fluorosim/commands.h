@@ -11,6 +11,7 @@ struct Interrupted : std::runtime_error {
 
 // Each adds its subcommand; the callback throws fluorosim::Error on bad input.
 void addRenderCommand(CLI::App& app);
+void addAcquireCommand(CLI::App& app);
 void addValidateCommands(CLI::App& app);
 void addVoxelizeCommand(CLI::App& app);
 // `validate emission` and `validate sweep`, under the `validate` command.

@@ -10,6 +10,7 @@ int main(int argc, char** argv) {
     CLI::App app{"Fluorosim: spectral Monte Carlo simulation of fluorescence microscopy"};
     app.require_subcommand(1);
     fluorosim::app::addRenderCommand(app);
+    fluorosim::app::addAcquireCommand(app);
     fluorosim::app::addValidateCommands(app);
     fluorosim::app::addVoxelizeCommand(app);
     try {

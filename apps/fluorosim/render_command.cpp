@@ -15,6 +15,7 @@
 #include "database.h"
 #include "io/image_io.h"
 #include "progress.h"
+#include "scene_files.h"
 #include "render/renderer.h"
 #include "scene/scene_loader.h"
 
@@ -94,9 +95,7 @@ void runRender(const RenderArgs& a) {
     if (!(a.checkpointSeconds > 0)) throw ConfigError("--checkpoint-seconds: must be positive, got " + std::to_string(a.checkpointSeconds));
     checkWritable(out);
     const spectra::Database db;
-    Scene scene = loadScene(
-        a.scene, [&db](const std::string& ref, const fs::path& base) { return db.resolve(ref, base); },
-        [&db](const std::string& name, std::optional<double> ec, std::optional<double> qy) { return db.fluorophore(name, ec, qy); });
+    Scene scene = loadSceneFile(a.scene, db);
     for (const std::string& w : scene.warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
     if (a.seed) scene.render.seed = *a.seed;
     if (!a.fluorescence.empty()) {
@@ -142,6 +141,8 @@ void runRender(const RenderArgs& a) {
                                     {"fluorescence", fluorescenceModelName(scene.render.fluorescence)},
                                     {"fluorescence_branches", s.stats.fluorescenceBranches},
                                     {"tentative_collisions", s.stats.tentativeCollisions},
+                                    {"scattering_events", s.stats.scatteringEvents},
+                                    {"surface_bounces", s.stats.surfaceBounces},
                                     // Null (and branch-process) collisions per real one: the cost of the majorants.
                                     {"null_per_real_collision", nullPerReal(s.stats)},
                                     {"cancelled", s.cancelled}};

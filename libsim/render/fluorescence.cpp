@@ -32,6 +32,18 @@ LightSpectra lightSpectra(const Scene& scene) {
 double maxMolar(const Medium& m, size_t dye) { return m.channelMax()[kFirstDyeChannel + dye]; }
 bool canEmit(const Medium& m, size_t dye) { return maxMolar(m, dye) > 0 && m.dyes()[dye].dye.quantumYield() > 0; }
 
+// The length over which a medium's dye varies: the voxel of a grid medium; for a homogeneous medium
+// the smallest diameter of the spheres that enclose it (other shapes: 1 mm, the old default scale).
+double featureSizeMm(const Scene& scene, int medium) {
+    const Medium& m = scene.media[static_cast<size_t>(medium)];
+    if (const VolumeFields* v = m.volume()) return v->voxelSizeMm();
+    double size = kGridBranchesPerVoxel;  // a cap of 1/mm
+    for (uint32_t s = 0; s < scene.shapes.size(); ++s)
+        if (scene.shapes[s].isInterface && scene.shapes[s].insideMedium == medium && scene.geometry.isSphere(s))
+            size = std::min(size, 2 * scene.geometry.sphereRadius(s));
+    return size;
+}
+
 struct Interval {
     double lo = std::numeric_limits<double>::infinity(), hi = -std::numeric_limits<double>::infinity();
     void add(std::pair<double, double> s) {
@@ -132,15 +144,16 @@ FluorescencePlan::FluorescencePlan(const Scene& scene)
             // dendrite at 10 µM has optical depth ~1e-4), so the density at the dye's largest
             // concentration is at least kGridBranchesPerVoxel per voxel length: each crossing then
             // branches, and the roulette in the tracer keeps the cost to what the branches carry.
+            // Likewise a dyed homogeneous object much smaller than a millimetre (a 0.2 µm bead) gets at
+            // least kGridBranchesPerVoxel branch points per diameter.
             double weight = kBranchBoost * dyePeakAbsorption(d.dye, 1.0);
-            if (const VolumeFields* v = scene.media[m].volume())
-                weight = std::max(weight, kGridBranchesPerVoxel / (v->voxelSizeMm() * maxMolar(scene.media[m], i)));
+            weight = std::max(weight, kGridBranchesPerVoxel / (featureSizeMm(scene, m) * maxMolar(scene.media[m], i)));
             weight /= d.dye.emissionPdfMax();
             media_[m].dyes.push_back({&d.dye, kFirstDyeChannel + static_cast<int>(i), weight});
             anyDye = true;
         }
     for (size_t m = 0; m < scene.media.size(); ++m)
-        if (const VolumeFields* v = scene.media[m].volume()) media_[m].branchCap = kGridBranchesPerVoxel / v->voxelSizeMm();
+        media_[m].branchCap = std::max(1.0, kGridBranchesPerVoxel / featureSizeMm(scene, static_cast<int>(m)));
     active_ = active_ && anyDye;
 }
 

@@ -33,7 +33,8 @@ SampledSpectrum PathTracer::transmittance(const Vec3& p0, const Vec3& p1, int me
 }
 
 PathTracer::TransmittanceEstimate PathTracer::estimateTransmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl,
-                                                                    Rng& rng, const Vec3* surfaceNormal, double surfaceEpsilon) const {
+                                                                    Rng& rng, const Vec3* surfaceNormal, double surfaceEpsilon,
+                                                                    bool untilRefraction) const {
     TransmittanceEstimate e{SampledSpectrum(1.0), SampledSpectrum(1.0), SampledSpectrum(1.0)};
     // Rays start exactly on surfaces and skip self-intersections with tMin, so every segment lies on
     // the line from p0 to p1 and its length is exact.
@@ -70,6 +71,8 @@ PathTracer::TransmittanceEstimate PathTracer::estimateTransmittance(const Vec3& 
         }
         if (!hit) return e;
         const ShapeInfo& s = scene_.shapes[hit->shape];
+        if (untilRefraction && s.isInterface && s.material != kNone && scene_.materials[static_cast<size_t>(s.material)]->isSpecular())
+            return e;
         if (!(s.isInterface && s.material == kNone)) return {SampledSpectrum(0.0), e.r_u, e.r_l};
         medium = mediumAfterCrossing(s, hit->n, r.d, medium);
         origin = r.at(hit->t);
@@ -171,7 +174,7 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double
     if (fluorescence_.model() == FluorescenceModel::Paper) {
         const double uLight = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform();
         if (const auto ls = lights_.sample(p, uLight, u1, u2, wlx); ls && ls->L && ls->pdf > 0)
-            Lx = start * transmittance(p, ls->p, medium, wlx, rng) * ls->L * (kInv4Pi / ls->pdf);
+            Lx = start * estimateTransmittance(p, ls->p, medium, wlx, rng, nullptr, 0.0, ls->beam).T * ls->L * (kInv4Pi / ls->pdf);
     } else {
         PathState sub;
         sub.ray = Ray{p, Vec3(0, 0, 1)};
@@ -224,7 +227,8 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         if (!fHat) return SampledSpectrum(0.0);
         int startMedium = lightMedium;
         if (surface) startMedium = mediumAfterCrossing(*surface, nOffset, ls->wi, lightMedium);
-        const TransmittanceEstimate T = estimateTransmittance(p, ls->p, startMedium, wl, rng, surface ? &nOffset : nullptr, surfaceEps);
+        const TransmittanceEstimate T =
+            estimateTransmittance(p, ls->p, startMedium, wl, rng, surface ? &nOffset : nullptr, surfaceEps, ls->beam);
         if (!T.T) return SampledSpectrum(0.0);
         const SampledSpectrum rl = T.r_l * r_p * ls->pdf;
         if (ls->delta) return beta * fHat * T.T * ls->L / rl.average();

@@ -65,8 +65,10 @@ private:
     struct TransmittanceEstimate {
         SampledSpectrum T, r_u, r_l;
     };
+    // With `untilRefraction`, the segment ends at the first smooth dielectric it meets (where a beam
+    // entered the sample) instead of being blocked by it.
     TransmittanceEstimate estimateTransmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl, Rng& rng,
-                                                const Vec3* surfaceNormal, double surfaceEpsilon) const;
+                                                const Vec3* surfaceNormal, double surfaceEpsilon, bool untilRefraction = false) const;
     // Ratio tracking over [0, length) of r in a grid medium; false once the estimate is zero.
     bool ratioTrack(const Medium& med, const MediumSpectra& spec, const Ray& r, double length, Rng& rng, TransmittanceEstimate& e) const;
     PathRadiance trace(PathState& state, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;

@@ -64,6 +64,22 @@ std::optional<LightSample> LightSampler::sample(const Vec3& ref, double uLight, 
         ls.delta = true;
         return ls;
     }
+    if (const BeamLight* beam = std::get_if<BeamLight>(&light)) {
+        // Exact connection: the light arrives along the beam, so the shadow ray runs from ref back
+        // against it to beyond the scene, where the beam comes from.
+        const int sides = beam->profile->sides();
+        const int side = std::min(sides - 1, static_cast<int>(u1 * sides));
+        ls.wi = -beam->profile->direction(side);
+        ls.distance = 2 * (scene_.geometry.extent() + length(ref)) + 1;
+        ls.p = ref + ls.wi * ls.distance;
+        ls.L = beam->profile->spectrum().sampleEmission(wl);
+        for (int j = 0; j < kNumWavelengths; ++j)
+            if (ls.L[j] != 0) ls.L[j] *= beam->profile->irradiance(ref, side, wl.lambda[j]) * kMm2PerM2;
+        ls.pdf = selectPdf / sides;
+        ls.delta = true;
+        ls.beam = true;
+        return ls;
+    }
     const auto& al = std::get<AreaLight>(light);
     ls.shape = al.shape;
     if (scene_.geometry.isSphere(al.shape)) {

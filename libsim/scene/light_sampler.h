@@ -15,6 +15,9 @@ struct LightSample {
     SampledSpectrum L;  // incident radiance (area) or intensity / distance^2 (delta lights)
     double pdf = 0;     // solid-angle pdf including light selection, or selection probability for delta lights
     bool delta = false;
+    // A beam (light sheet): its profile holds inside the sample, so the shadow ray ends where the beam
+    // entered it, at the first refracting interface, instead of at `p`.
+    bool beam = false;
     uint32_t shape = 0;
 };
 

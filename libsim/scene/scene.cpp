@@ -14,7 +14,9 @@ std::optional<FluorescenceModel> fluorescenceModelFromName(const std::string& na
 const Spectrum& emissionSpectrum(const Light& light) {
     return std::visit(
         [](const auto& l) -> const Spectrum& {
-            if constexpr (std::is_same_v<std::decay_t<decltype(l)>, AreaLight>) return l.emission.radiance;
+            using T = std::decay_t<decltype(l)>;
+            if constexpr (std::is_same_v<T, AreaLight>) return l.emission.radiance;
+            else if constexpr (std::is_same_v<T, BeamLight>) return l.profile->spectrum();
             else return l.intensity;
         },
         light);

@@ -10,6 +10,7 @@
 #include "geometry/geometry.h"
 #include "materials/material.h"
 #include "media/medium.h"
+#include "scene/beam.h"
 #include "spectral/spectrum.h"
 
 namespace fluorosim {
@@ -44,9 +45,15 @@ struct SpotLight {
     Spectrum intensity;  // on the axis
     double cosTotalWidth, cosFalloffStart;
 };
-using Light = std::variant<AreaLight, PointLight, SpotLight>;
+// A light sheet or beam (see scene/beam.h), connected to exactly by next-event estimation.
+struct BeamLight {
+    std::shared_ptr<BeamProfile> profile;
+    LightSheetSpec spec;
+};
+using Light = std::variant<AreaLight, PointLight, SpotLight, BeamLight>;
 
-// What a light emits: an area light's radiance, or a point or spot light's intensity.
+// What a light emits: an area light's radiance, a point or spot light's intensity, or a beam's
+// normalised spectrum.
 const Spectrum& emissionSpectrum(const Light& light);
 
 struct Camera {
@@ -88,6 +95,7 @@ struct Scene {
     SpectralSettings spectral;
     RenderSettings render;
     std::vector<std::string> warnings;  // things the user must know that are not errors
+    std::string microscopeJson;         // the "microscope" block, read by optics/ and the acquire command
 
     // Refractive index on each side of an interface (1 where no medium is given).
     double ior(int medium) const { return medium == kNone ? 1.0 : media[static_cast<size_t>(medium)].ior(); }

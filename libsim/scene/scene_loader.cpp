@@ -142,16 +142,21 @@ enum class SpectrumKind { Reflectance, Coefficient, Emission, Unitless };
 
 class Loader {
 public:
-    Loader(const fs::path& file, const SpectrumResolver& resolve, const DyeResolver& dyes) : file_(file), resolve_(resolve), dyes_(dyes) {
+    Loader(const fs::path& file, const SpectrumResolver& resolve, const DyeResolver& dyes, const BeamResolver& beams)
+        : file_(file), resolve_(resolve), dyes_(dyes), beams_(beams) {
         baseDir_ = file.has_parent_path() ? file.parent_path() : fs::path(".");
     }
 
     Scene load(const json& root) {
         const Node r(root, "", file_);
-        r.allowOnly({"fluorosim_scene", "description", "spectral", "render", "camera", "media", "materials", "shapes", "lights"});
+        r.allowOnly({"fluorosim_scene", "description", "spectral", "render", "camera", "media", "materials", "shapes", "lights", "microscope"});
         if (r.at("fluorosim_scene").integer(1, 1000) != 1) r.at("fluorosim_scene").fail("unsupported scene format version (this build reads 1)");
         if (r.has("description")) r.at("description").str();
         Scene scene;
+        if (r.has("microscope")) {
+            r.at("microscope").requireObject();
+            scene.microscopeJson = r.at("microscope").raw().dump();
+        }
         if (r.has("spectral")) loadSpectral(r.at("spectral"), scene);
         if (r.has("render")) loadRender(r.at("render"), scene);
         if (r.has("media")) loadMedia(r.at("media"), scene);
@@ -620,6 +625,8 @@ private:
                 PointLight p{l.at("position").vec3(Dimension::Length), spectrum(l.at("intensity"), SpectrumKind::Emission)};
                 requirePower(l.at("intensity"), p.intensity);
                 scene.lights.emplace_back(std::move(p));
+            } else if (type == "light_sheet") {
+                scene.lights.emplace_back(loadLightSheet(l));
             } else if (type == "spot") {
                 l.allowOnly({"type", "position", "look_at", "intensity", "cone_angle_deg", "falloff_start_deg"});
                 const Vec3 pos = l.at("position").vec3(Dimension::Length);
@@ -634,6 +641,40 @@ private:
             } else {
                 l.at("type").fail("unknown light type (known: point, spot; area lights are shapes with \"emission\")");
             }
+        }
+    }
+
+    // {"type": "light_sheet", "wavelength": "488 nm" (or "spectrum": ...), "power_mW": 10,
+    //  "propagation": [1, 0, 0], "normal": [0, 0, 1], "center": [...], "waist": "2 um" (or
+    //  "illumination_na": 0.05), "height": "0.5 mm", "refractive_index": 1.33,
+    //  "mode": "static" | "scanned", "sides": 1 | 2}
+    BeamLight loadLightSheet(const Node& l) {
+        l.allowOnly({"type", "wavelength", "spectrum", "power_mW", "propagation", "normal", "center", "waist", "illumination_na", "height",
+                     "refractive_index", "mode", "sides"});
+        if (!beams_) l.fail("light sheets need the optics library (this program cannot load them)");
+        LightSheetSpec spec;
+        if (l.has("wavelength") == l.has("spectrum")) l.fail("give exactly one of \"wavelength\" and \"spectrum\"");
+        if (l.has("wavelength")) spec.wavelengthNm = l.at("wavelength").positiveQuantity(Dimension::Wavelength);
+        else spec.spectrum = spectrum(l.at("spectrum"), SpectrumKind::Emission);
+        spec.powerMw = l.at("power_mW").number(0, 1e6, true);
+        spec.propagation = l.at("propagation").vec3(Dimension::Dimensionless);
+        spec.normal = l.at("normal").vec3(Dimension::Dimensionless);
+        spec.centreMm = l.at("center").vec3(Dimension::Length);
+        if (l.has("waist") == l.has("illumination_na")) l.fail("give exactly one of \"waist\" and \"illumination_na\"");
+        if (l.has("waist")) spec.waistMm = l.at("waist").positiveQuantity(Dimension::Length);
+        else spec.illuminationNa = l.at("illumination_na").number(0, 2, true);
+        spec.heightMm = l.at("height").positiveQuantity(Dimension::Length);
+        spec.refractiveIndex = l.has("refractive_index") ? l.at("refractive_index").number(1, 3) : 1.33;
+        if (l.has("mode")) {
+            const std::string m = l.at("mode").str();
+            if (m != "static" && m != "scanned") l.at("mode").fail("expected \"static\" or \"scanned\"");
+            spec.scanned = m == "scanned";
+        }
+        if (l.has("sides")) spec.dual = l.at("sides").integer(1, 2) == 2;
+        try {
+            return BeamLight{beams_(spec), spec};
+        } catch (const ConfigError& e) {
+            l.failQuoted(e.what());
         }
     }
 
@@ -667,6 +708,7 @@ private:
     fs::path baseDir_;
     const SpectrumResolver& resolve_;
     const DyeResolver& dyes_;
+    const BeamResolver& beams_;
     std::map<std::string, int> mediumIndex_, materialIndex_;
     std::set<std::string> dielectrics_;
     std::vector<std::string> warnings_;
@@ -675,22 +717,23 @@ private:
 
 }  // namespace
 
-Scene loadSceneFromString(const std::string& text, const fs::path& file, const SpectrumResolver& resolve, const DyeResolver& dyes) {
+Scene loadSceneFromString(const std::string& text, const fs::path& file, const SpectrumResolver& resolve, const DyeResolver& dyes,
+                          const BeamResolver& beams) {
     json root;
     try {
         root = json::parse(text);
     } catch (const json::parse_error& e) {
         throw ConfigError(file.string() + ": malformed JSON: " + e.what());
     }
-    return Loader(file, resolve, dyes).load(root);
+    return Loader(file, resolve, dyes, beams).load(root);
 }
 
-Scene loadScene(const fs::path& file, const SpectrumResolver& resolve, const DyeResolver& dyes) {
+Scene loadScene(const fs::path& file, const SpectrumResolver& resolve, const DyeResolver& dyes, const BeamResolver& beams) {
     std::ifstream in(file);
     if (!in) throw IoError(file.string() + ": cannot open scene file");
     std::stringstream ss;
     ss << in.rdbuf();
-    return loadSceneFromString(ss.str(), file, resolve, dyes);
+    return loadSceneFromString(ss.str(), file, resolve, dyes, beams);
 }
 
 }  // namespace fluorosim

@@ -20,9 +20,14 @@ using SpectrumResolver = std::function<TabulatedSpectrum(const std::string& refe
 using DyeResolver = std::function<Fluorophore(const std::string& name, std::optional<double> extinctionPeak,
                                               std::optional<double> quantumYield)>;
 
-Scene loadScene(const std::filesystem::path& file, const SpectrumResolver& resolve, const DyeResolver& dyes = {});
+// Builds the profile of a "light_sheet" light (optics/, which libsim does not depend on); throws
+// ConfigError for bad parameters.
+using BeamResolver = std::function<std::shared_ptr<BeamProfile>(const LightSheetSpec& spec)>;
+
+Scene loadScene(const std::filesystem::path& file, const SpectrumResolver& resolve, const DyeResolver& dyes = {},
+                const BeamResolver& beams = {});
 // Same, from a JSON text; `file` is used for messages and relative paths.
 Scene loadSceneFromString(const std::string& text, const std::filesystem::path& file, const SpectrumResolver& resolve,
-                          const DyeResolver& dyes = {});
+                          const DyeResolver& dyes = {}, const BeamResolver& beams = {});
 
 }  // namespace fluorosim
