@@ -33,14 +33,29 @@ double maxMolar(const Medium& m, size_t dye) { return m.channelMax()[kFirstDyeCh
 bool canEmit(const Medium& m, size_t dye) { return maxMolar(m, dye) > 0 && m.dyes()[dye].dye.quantumYield() > 0; }
 
 // The length over which a medium's dye varies: the voxel of a grid medium; for a homogeneous medium
-// the smallest diameter of the spheres that enclose it (other shapes: 1 mm, the old default scale).
+// the smallest diameter of the spheres, or the thinnest bounding-box side of the meshes, that enclose
+// it (at most 4 mm, which keeps the old cap of 1/mm for large objects).
 double featureSizeMm(const Scene& scene, int medium) {
     const Medium& m = scene.media[static_cast<size_t>(medium)];
     if (const VolumeFields* v = m.volume()) return v->voxelSizeMm();
-    double size = kGridBranchesPerVoxel;  // a cap of 1/mm
-    for (uint32_t s = 0; s < scene.shapes.size(); ++s)
-        if (scene.shapes[s].isInterface && scene.shapes[s].insideMedium == medium && scene.geometry.isSphere(s))
+    double size = kGridBranchesPerVoxel;
+    for (uint32_t s = 0; s < scene.shapes.size(); ++s) {
+        if (!scene.shapes[s].isInterface || scene.shapes[s].insideMedium != medium) continue;
+        if (scene.geometry.isSphere(s)) {
             size = std::min(size, 2 * scene.geometry.sphereRadius(s));
+            continue;
+        }
+        const auto& positions = scene.geometry.mesh(s).positions;
+        if (positions.empty()) continue;
+        Vec3 lo = positions[0], hi = positions[0];
+        for (const Vec3& p : positions)
+            for (int a = 0; a < 3; ++a) {
+                lo[a] = std::min(lo[a], p[a]);
+                hi[a] = std::max(hi[a], p[a]);
+            }
+        for (int a = 0; a < 3; ++a)
+            if (hi[a] - lo[a] > 0) size = std::min(size, hi[a] - lo[a]);
+    }
     return size;
 }
 

@@ -1,0 +1,94 @@
+// Photon budget of the simulated microscope: a thin uniform dye layer in the focal plane, lit in its
+// own plane by a known static light sheet, must give the expected photoelectrons of the closed-form
+// chain: absorbed photons (σa E / (hc/λx), with the sheet's Beer–Lambert loss from where it entered
+// the layer) × Φ × collection fraction Ω/4π × ∫ f(λ) T(λ) QE(λ) dλ × object pixel area × exposure.
+// The goal is 1 %. This test checks agreement within 4 standard errors at a CI-sized budget
+// (measured: ratio 0.9826 +- 0.0085 at 200 spp, 11 s; 0.9972 +- 0.0089 at 3000 spp, 153 s). The
+// standard error barely falls with the budget, so the per-pixel errors are dominated by rare large
+// samples; the 1 % goal is therefore not demonstrated yet (see docs/validation.md).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+
+#include "optics/acquisition.h"
+#include "optics/light_sheet.h"
+#include "support/fluorescent_scenes.h"
+
+namespace fluorosim {
+namespace {
+
+using namespace testing;
+
+TEST(PhotonBudget, ThinDyeLayerUnderKnownSheetMatchesTheClosedFormChain) {
+    const double molar = 1e-4, d = 0.001, half = 0.05;  // 100 µM AF488, 1 µm thick, 0.1 mm wide
+    const Fluorophore dye = databaseDye("AF488");
+    Scene scene;
+    scene.spectral.lambdaMin = 450;
+    scene.spectral.lambdaMax = 700;
+    scene.media.emplace_back("water", Spectrum::constant(0.0), Spectrum::constant(0.0), 0.0, 1.33);
+    scene.media.emplace_back("layer", Spectrum::constant(0.0), Spectrum::constant(0.0), 0.0, 1.33, std::vector<DyeComponent>{{dye, molar}});
+    addMediumBox(scene, Vec3(-half, -half, -d / 2), Vec3(half, half, d / 2), 1);
+    scene.shapes.back().outsideMedium = 0;
+    addMediumBox(scene, Vec3(-0.4, -0.4, -0.4), Vec3(0.4, 0.4, 0.4), 0);  // the water bath (vacuum outside)
+    scene.shapes.back().material = static_cast<int>(scene.materials.size());
+    scene.materials.push_back(makeDielectric(0.0));
+    scene.materialNames.push_back("bath surface");
+    LightSheetSpec spec;
+    spec.wavelengthNm = 488;
+    spec.powerMw = 1;
+    spec.waistMm = 0.01;  // ten times the layer: the profile across it is nearly flat (included exactly below)
+    spec.heightMm = 1;
+    spec.refractiveIndex = 1.33;
+    auto sheet = optics::makeLightSheet(spec);
+    scene.lights.push_back(BeamLight{sheet, spec});
+    scene.camera.medium = 0;
+    scene.finalize();
+
+    optics::ObjectiveOptions objective;
+    objective.na = 0.8;
+    objective.magnification = 16;
+    objective.workingDistanceMm = 0.2;
+    optics::DetectorOptions detector;
+    detector.qe = Spectrum::constant(0.8);
+    detector.exposureS = 0.01;
+    optics::BandPassOptions band;
+    const optics::Filter filter = optics::Filter::bandPass(band);
+    optics::PlaneRenderOptions o;
+    o.width = o.height = 16;
+    o.spp = 200;
+    o.seed = 5;
+    const optics::PlaneResult r = optics::renderPlane(scene, objective, optics::FocalPlane{}, filter, detector, o);
+
+    // Closed form per pixel centre.
+    constexpr double hc = 1.98644586e-16;  // J nm
+    const double sigmaX = dyeAbsorption(dye, 488.0, molar);
+    double spectral = 0;  // ∫ f T QE dλ
+    for (double l = 450; l < 700; l += 0.05) spectral += dye.emissionPdf(l + 0.025) * filter.transmission(l + 0.025) * 0.8 * 0.05;
+    const double cosMax = std::cos(objective.collectionHalfAngle());
+    const double collection = 2 * kPi * (1 - cosMax) / (4 * kPi);
+    const double pixelMm = 6.5e-3 / 16;
+    double expected = 0, measured = 0, var = 0;
+    for (int y = 0; y < o.height; ++y)
+        for (int x = 0; x < o.width; ++x) {
+            const Vec3 p((x + 0.5 - 0.5 * o.width) * pixelMm, (0.5 * o.height - y - 0.5) * pixelMm, 0);
+            // Mean irradiance through the layer's thickness (midpoint rule, 200 slices), attenuated from
+            // where the sheet entered the layer at x = -half.
+            double e = 0;
+            for (int k = 0; k < 200; ++k) e += sheet->irradiance(p + Vec3(0, 0, -d / 2 + (k + 0.5) * d / 200), 0, 488.0) / 200;
+            e *= std::exp(-sigmaX * (p.x + half));
+            const double absorbedPhotons = sigmaX * d * e / (hc / 488.0);  // per s per mm²
+            expected += absorbedPhotons * dye.quantumYield() * collection * spectral * pixelMm * pixelMm * detector.exposureS;
+            const size_t i = static_cast<size_t>(y) * o.width + x;
+            measured += r.electrons[i];
+            var += r.stderrElectrons[i] * r.stderrElectrons[i];
+        }
+    const double se = std::sqrt(var);
+    std::printf("  expected photoelectrons over 16x16 pixels: simulated %.6g +- %.2g, closed form %.6g, ratio %.5f (%.1f s)\n", measured, se,
+                expected, measured / expected, r.seconds);
+    EXPECT_LT(se, 0.05 * expected) << "the check must resolve a 20 % error";
+    EXPECT_LT(std::abs(measured - expected), 4 * se);
+}
+
+}  // namespace
+}  // namespace fluorosim
