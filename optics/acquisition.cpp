@@ -55,6 +55,7 @@ PlaneResult renderPlane(const Scene& scene, const ObjectiveOptions& objective, c
     r.electrons.assign(static_cast<size_t>(o.width) * o.height, 0.0);
     r.stderrElectrons.assign(r.electrons.size(), 0.0);
     std::vector<uint64_t> rowPaths(static_cast<size_t>(o.height), 0);
+    std::vector<double> rowLargest(static_cast<size_t>(o.height), 0.0);
     std::atomic<int> rowsDone{0};
     std::mutex progressMutex;  // the callback is called from one thread at a time
     parallelFor(static_cast<size_t>(o.height), o.threads, [&](size_t y) {
@@ -82,6 +83,7 @@ PlaneResult renderPlane(const Scene& scene, const ObjectiveOptions& objective, c
                 e *= cosT * solidAngle * areaM2 * detector.exposureS / kNumWavelengths;
                 sum += e;
                 sum2 += e * e;
+                rowLargest[y] = std::max(rowLargest[y], e);
             }
             const double n = o.spp;
             r.electrons[pixel] = sum / n;
@@ -95,6 +97,7 @@ PlaneResult renderPlane(const Scene& scene, const ObjectiveOptions& objective, c
         }
     });
     for (uint64_t p : rowPaths) r.paths += p;
+    for (double l : rowLargest) r.largestSample = std::max(r.largestSample, l);
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return r;
 }

@@ -46,6 +46,7 @@ struct PlaneResult {
     std::vector<double> stderrElectrons;
     uint64_t paths = 0;
     double seconds = 0;
+    double largestSample = 0;  // a diagnostic of heavy tails: the largest single path's electrons
 };
 
 // Expected photoelectrons of one image (row-major from the top) with the given filter and detector.

@@ -25,6 +25,7 @@ struct Photon {
     double lambda = 0;
     double weight = 0;  // watts carried
     bool fluorescent = false;
+    double tMin = 0;  // > 0 when the ray starts on the surface it leaves (no offset origin: see path_tracer.cpp)
 };
 
 double lightSpectrumSample(const Spectrum& s, double lambdaMin, double lambdaMax, Rng& rng, double* lambda) {
@@ -68,7 +69,8 @@ public:
         if (ph.weight == 0) return;
         bool absorbedOnce = false;
         for (int events = 0; events < 100000000; ++events) {
-            const auto hit = scene_.geometry.intersect(ph.ray, 0.0, std::numeric_limits<double>::infinity());
+            const auto hit = scene_.geometry.intersect(ph.ray, ph.tMin, std::numeric_limits<double>::infinity());
+            ph.tMin = 0;
             if (ph.medium != kNone) {
                 const Medium& m = scene_.media[static_cast<size_t>(ph.medium)];
                 // Analog delta tracking at the photon's one wavelength (exact sampling in a homogeneous medium).
@@ -145,14 +147,16 @@ public:
                 const double R = fresnelDielectric(cosI, n2 / n1);
                 Vec3 wt;
                 if (rng.uniform() < R || !refract(-ph.ray.d, nFacing, n2 / n1, &wt)) {
-                    dir = ph.ray.d + nFacing * (2 * cosI);
-                    ph.ray = Ray{hit->p + nFacing * hit->epsilon, normalize(dir)};
+                    dir = normalize(ph.ray.d + nFacing * (2 * cosI));
+                    ph.ray = Ray{hit->p, dir};
+                    ph.tMin = hit->epsilon / std::max(std::abs(dot(hit->n, dir)), 1e-2);
                     continue;
                 }
                 dir = wt;
             }
             ph.medium = next;
-            ph.ray = Ray{hit->p + hit->n * (dot(hit->n, dir) > 0 ? hit->epsilon : -hit->epsilon), dir};
+            ph.ray = Ray{hit->p, dir};
+            ph.tMin = hit->epsilon / std::max(std::abs(dot(hit->n, dir)), 1e-2);
         }
     }
 

@@ -2,10 +2,13 @@
 // own plane by a known static light sheet, must give the expected photoelectrons of the closed-form
 // chain: absorbed photons (σa E / (hc/λx), with the sheet's Beer–Lambert loss from where it entered
 // the layer) × Φ × collection fraction Ω/4π × ∫ f(λ) T(λ) QE(λ) dλ × object pixel area × exposure.
-// The goal is 1 %. This test checks agreement within 4 standard errors at a CI-sized budget
-// (measured: ratio 0.9826 +- 0.0085 at 200 spp, 11 s; 0.9972 +- 0.0089 at 3000 spp, 153 s). The
-// standard error barely falls with the budget, so the per-pixel errors are dominated by rare large
-// samples; the 1 % goal is therefore not demonstrated yet (see docs/validation.md).
+// Tolerance: 1 % (the goal) and 4 standard errors, with the standard error below 0.3 %.
+// This test found a bias: rays leaving a surface used to start a small offset away from it, so every
+// crossing skipped about 20 nm of medium (a 1 µm layer read 2.2 % low, a 0.2 µm one 10 %).
+// The dye absorbs only at 440-500 nm and emits only at 600-700 nm: with AF488 the layer re-absorbs
+// part of its own emission (emission travelling inside the layer), which adds secondary fluorescence
+// that the chain leaves out and makes the estimate heavy-tailed (one path in 10^5 carried 5000 times
+// the mean: a sub-path at a re-absorbed wavelength grazing along the 1 µm layer).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -21,11 +24,11 @@ namespace {
 using namespace testing;
 
 TEST(PhotonBudget, ThinDyeLayerUnderKnownSheetMatchesTheClosedFormChain) {
-    const double molar = 1e-4, d = 0.001, half = 0.05;  // 100 µM AF488, 1 µm thick, 0.1 mm wide
-    const Fluorophore dye = databaseDye("AF488");
+    const double molar = 1e-4, d = 0.001, half = 0.05;  // 100 µM, 1 µm thick, 0.1 mm wide
+    const Fluorophore dye = separatedBandDye(70000, 0.9);
     Scene scene;
     scene.spectral.lambdaMin = 450;
-    scene.spectral.lambdaMax = 700;
+    scene.spectral.lambdaMax = 750;
     scene.media.emplace_back("water", Spectrum::constant(0.0), Spectrum::constant(0.0), 0.0, 1.33);
     scene.media.emplace_back("layer", Spectrum::constant(0.0), Spectrum::constant(0.0), 0.0, 1.33, std::vector<DyeComponent>{{dye, molar}});
     addMediumBox(scene, Vec3(-half, -half, -d / 2), Vec3(half, half, d / 2), 1);
@@ -53,10 +56,12 @@ TEST(PhotonBudget, ThinDyeLayerUnderKnownSheetMatchesTheClosedFormChain) {
     detector.qe = Spectrum::constant(0.8);
     detector.exposureS = 0.01;
     optics::BandPassOptions band;
+    band.centreNm = 650;
+    band.fwhmNm = 60;
     const optics::Filter filter = optics::Filter::bandPass(band);
     optics::PlaneRenderOptions o;
     o.width = o.height = 16;
-    o.spp = 200;
+    o.spp = 1000;
     o.seed = 5;
     const optics::PlaneResult r = optics::renderPlane(scene, objective, optics::FocalPlane{}, filter, detector, o);
 
@@ -64,7 +69,7 @@ TEST(PhotonBudget, ThinDyeLayerUnderKnownSheetMatchesTheClosedFormChain) {
     constexpr double hc = 1.98644586e-16;  // J nm
     const double sigmaX = dyeAbsorption(dye, 488.0, molar);
     double spectral = 0;  // ∫ f T QE dλ
-    for (double l = 450; l < 700; l += 0.05) spectral += dye.emissionPdf(l + 0.025) * filter.transmission(l + 0.025) * 0.8 * 0.05;
+    for (double l = 450; l < 750; l += 0.05) spectral += dye.emissionPdf(l + 0.025) * filter.transmission(l + 0.025) * 0.8 * 0.05;
     const double cosMax = std::cos(objective.collectionHalfAngle());
     const double collection = 2 * kPi * (1 - cosMax) / (4 * kPi);
     const double pixelMm = 6.5e-3 / 16;
@@ -84,9 +89,10 @@ TEST(PhotonBudget, ThinDyeLayerUnderKnownSheetMatchesTheClosedFormChain) {
             var += r.stderrElectrons[i] * r.stderrElectrons[i];
         }
     const double se = std::sqrt(var);
-    std::printf("  expected photoelectrons over 16x16 pixels: simulated %.6g +- %.2g, closed form %.6g, ratio %.5f (%.1f s)\n", measured, se,
-                expected, measured / expected, r.seconds);
-    EXPECT_LT(se, 0.05 * expected) << "the check must resolve a 20 % error";
+    std::printf("  expected photoelectrons over 16x16 pixels: simulated %.6g +- %.2g, closed form %.6g, ratio %.5f (%.1f s), largest sample %.3g, mean sample %.3g\n",
+                measured, se, expected, measured / expected, r.seconds, r.largestSample, measured / (o.width * o.height));
+    EXPECT_LT(se, 0.003 * expected) << "the check must resolve well below 1 %";
+    EXPECT_NEAR(measured / expected, 1.0, 0.01);
     EXPECT_LT(std::abs(measured - expected), 4 * se);
 }
 
