@@ -9,6 +9,7 @@
 #include "core/errors.h"
 #include "core/parallel.h"
 #include "core/rng.h"
+#include "optics/psf.h"
 #include "render/fluorescence.h"
 #include "render/path_tracer.h"
 
@@ -51,6 +52,7 @@ PlaneResult renderPlane(const Scene& scene, const ObjectiveOptions& objective, c
     // Étendue factor per sample: object pixel area (m²) × solid angle (uniform sampling) × exposure.
     const double areaM2 = pixelMm * pixelMm * 1e-6;
     const Frame frame{right, up, w};
+    static const AiryPattern airy;
     PlaneResult r;
     r.electrons.assign(static_cast<size_t>(o.width) * o.height, 0.0);
     r.stderrElectrons.assign(r.electrons.size(), 0.0);
@@ -68,7 +70,23 @@ PlaneResult renderPlane(const Scene& scene, const ObjectiveOptions& objective, c
                 const SampledWavelengths wl = wavelengths.sample(rng.uniform(), rng.uniform());
                 const double px = (x + rng.uniform() - 0.5 * o.width) * pixelMm;
                 const double py = (0.5 * o.height - (static_cast<double>(y) + rng.uniform())) * pixelMm;
-                const Vec3 focal = focus.centreMm + right * px + up * py;
+                Vec3 focal = focus.centreMm + right * px + up * py;
+                // Diffraction: the focal point moves by a sample of the hero wavelength's Airy pattern;
+                // each wavelength is weighted by its own PSF over the mean of the four (one-sample MIS).
+                double psfWeight[kNumWavelengths] = {1, 1, 1, 1};
+                if (o.diffraction) {
+                    const double r = airy.sampleRadiusMm(rng.uniform(), wl.lambda[0], objective.na);
+                    const double a = 2 * kPi * rng.uniform();
+                    focal += (right * std::cos(a) + up * std::sin(a)) * r;
+                    if (!wl.discrete) {
+                        double density[kNumWavelengths], mean = 0;
+                        for (int j = 0; j < kNumWavelengths; ++j) {
+                            density[j] = airy.densityPerMm2(r, wl.lambda[j], objective.na);
+                            mean += density[j] / kNumWavelengths;
+                        }
+                        for (int j = 0; j < kNumWavelengths; ++j) psfWeight[j] = mean > 0 ? density[j] / mean : 0.0;
+                    }
+                }
                 const double cosT = 1 - rng.uniform() * (1 - cosMax), phi = 2 * kPi * rng.uniform();
                 const double sinT = std::sqrt(std::max(0.0, 1 - cosT * cosT));
                 const Vec3 toObjective = frame.toWorld(Vec3(sinT * std::cos(phi), sinT * std::sin(phi), cosT));
@@ -78,7 +96,7 @@ PlaneResult renderPlane(const Scene& scene, const ObjectiveOptions& objective, c
                 for (int j = 0; j < kNumWavelengths; ++j) {
                     if (L[j] == 0 || wl.pdf[j] == 0) continue;
                     const double lambda = wl.lambda[j];
-                    e += L[j] / wl.pdf[j] * emission.transmission(lambda) * detector.qe(lambda) * lambda / kPlanckTimesC;
+                    e += psfWeight[j] * L[j] / wl.pdf[j] * emission.transmission(lambda) * detector.qe(lambda) * lambda / kPlanckTimesC;
                 }
                 e *= cosT * solidAngle * areaM2 * detector.exposureS / kNumWavelengths;
                 sum += e;

@@ -6,7 +6,8 @@
 // collection cone are geometric and physical. The mean radiance becomes expected photoelectrons
 // through the real étendue (object pixel area × ∫cone cosθ dω), the exposure, the filter and the QE:
 //     e = t · A · ∫cone cosθ ∫ L(λ) T(λ) QE(λ) λ/(hc) dλ dω.
-// Not modelled: the diffraction PSF (the lateral blur of an in-focus point); see docs/optics.md.
+// The in-focus diffraction PSF (Airy, optics/psf.h) displaces each path's focal-plane point; defocus
+// stays geometric, so it is not counted twice (docs/optics.md).
 #include <cstdint>
 #include <functional>
 #include <vector>
@@ -38,6 +39,7 @@ struct PlaneRenderOptions {
     uint64_t seed = 1;
     uint64_t planeKey = 0;  // keys the random streams so every plane is independent and reproducible
     int threads = 0;
+    bool diffraction = true;  // the Airy PSF; off gives the geometric image
     std::function<void(double)> progress;
 };
 
