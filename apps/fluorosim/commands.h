@@ -16,5 +16,7 @@ void addValidateCommands(CLI::App& app);
 void addVoxelizeCommand(CLI::App& app);
 // `validate emission` and `validate sweep`, under the `validate` command.
 void addFluorescenceValidations(CLI::App& validate);
+// `validate lightsheet`.
+void addLightSheetValidation(CLI::App& validate);
 
 }  // namespace fluorosim::app

@@ -109,6 +109,7 @@ void addValidateCommands(CLI::App& app) {
     slab->add_flag("--quiet", a->quiet, "No progress bar");
     slab->callback([a] { runSlab(*a); });
     addFluorescenceValidations(*validate);
+    addLightSheetValidation(*validate);
 }
 
 }  // namespace fluorosim::app

@@ -1,6 +1,8 @@
 // The fluorosim command line: exit codes (2 ConfigError, 3 IoError) and one-line error messages on
 // stderr that name the problem, run through the built binary.
 #include <gtest/gtest.h>
+
+#include "support/cli_runner.h"
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -21,76 +23,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
-
-bool contains(const std::string& haystack, const std::string& needle) { return haystack.find(needle) != std::string::npos; }
-
-std::string quote(const std::string& s) {
-    std::string q = "'";
-    for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-    return q + "'";
-}
-
-std::string readFile(const fs::path& p) {
-    std::ifstream in(p);
-    std::stringstream ss;
-    ss << in.rdbuf();
-    return ss.str();
-}
-
-struct RunResult {
-    int exitCode = -1;  // 128+N when killed by signal N (as the shell reports it)
-    std::string out, err;
-    double seconds = 0;
-};
-
-// A per-test temporary folder, removed at the end of the test.
-class TempDir {
-public:
-    TempDir() {
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        path_ = fs::temp_directory_path() / ("fluorosim_cli_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
-        fs::remove_all(path_);
-        fs::create_directories(path_);
-    }
-    ~TempDir() {
-        std::error_code ec;
-        fs::remove_all(path_, ec);
-    }
-    const fs::path& path() const { return path_; }
-    fs::path write(const std::string& name, const std::string& text) const {
-        const fs::path p = path_ / name;
-        std::ofstream(p) << text;
-        return p;
-    }
-
-private:
-    fs::path path_;
-};
-
-// Runs the CLI with `args`, stdin from /dev/null, stdout and stderr captured to files in `dir`.
-// A generous timeout keeps a misbehaving binary from hanging the test run (exit code 124).
-RunResult runCli(const TempDir& dir, const std::vector<std::string>& args, int timeoutSeconds = 120) {
-    const fs::path outFile = dir.path() / "stdout.txt", errFile = dir.path() / "stderr.txt";
-    std::string cmd = "timeout -k 5 " + std::to_string(timeoutSeconds) + " " + quote(FLUOROSIM_CLI);
-    for (const auto& a : args) cmd += " " + quote(a);
-    cmd += " </dev/null >" + quote(outFile.string()) + " 2>" + quote(errFile.string());
-    const auto start = std::chrono::steady_clock::now();
-    const int status = std::system(cmd.c_str());
-    RunResult r;
-    r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    r.exitCode = status == -1 ? -1 : WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-    r.out = readFile(outFile);
-    r.err = readFile(errFile);
-    return r;
-}
-
-// stderr is exactly one line, starting with "fluorosim: ", containing every part.
-void expectOneLineError(const RunResult& r, const std::vector<std::string>& parts) {
-    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << "stderr:\n" << r.err;
-    EXPECT_TRUE(!r.err.empty() && r.err.back() == '\n') << "stderr:\n" << r.err;
-    EXPECT_EQ(r.err.rfind("fluorosim: ", 0), 0u) << "stderr:\n" << r.err;
-    for (const auto& p : parts) EXPECT_TRUE(contains(r.err, p)) << "no \"" << p << "\" in stderr:\n" << r.err;
-}
+using namespace testing;
 
 std::string sceneJson(int width, int height, int spp) {
     json j = json::parse(R"({

@@ -1,0 +1,102 @@
+// `fluorosim acquire` and `validate lightsheet` end to end, and the microscope's bad input: an NA
+// above the immersion index, zero exposure, a bit depth outside 8-16, a filter that blocks the dye's
+// emission (a warning), a sheet that misses the sample (a warning and an honestly empty stack), an
+// unwritable output.
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+
+#include "optics/ome_tiff.h"
+#include "support/cli_runner.h"
+
+namespace fluorosim {
+namespace {
+
+using json = nlohmann::json;
+using namespace testing;
+
+const fs::path kBeads = fs::path(FLUOROSIM_SOURCE_DIR) / "samples" / "lightsheet" / "beads.json";
+
+// beads.json with absolute mesh paths, small, after `edit`.
+fs::path beads(const TempDir& dir, const std::function<void(json&)>& edit = {}) {
+    json j = json::parse(readFile(kBeads));
+    j["shapes"][0]["file"] = (kBeads.parent_path() / "bath.obj").string();
+    j["microscope"]["detector"]["width"] = 16;
+    j["microscope"]["detector"]["height"] = 16;
+    if (edit) edit(j);
+    return dir.write("beads.json", j.dump());
+}
+
+TEST(AcquireCli, WritesOmeTiffStacks) {
+    TempDir dir;
+    const fs::path out = dir.path() / "stack.ome.tif";
+    const auto r = runCli(dir, {"acquire", beads(dir).string(), "-o", out.string(), "--planes", "3", "--step", "1um", "--spp", "2"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const json summary = json::parse(r.out);
+    EXPECT_EQ(summary["planes"], 3);
+    EXPECT_NEAR(summary["pixel_size_um"].get<double>(), 6.5 / 16, 1e-12);
+    const optics::TiffStackInfo stack = optics::readTiffStack(out, false);
+    EXPECT_EQ(stack.pages, 3);
+    EXPECT_EQ(stack.width, 16);
+    EXPECT_EQ(stack.bitsPerSample, 16);
+    EXPECT_TRUE(contains(stack.imageDescription, "PhysicalSizeZ=\"1\"")) << stack.imageDescription.substr(0, 600);
+    EXPECT_TRUE(contains(stack.imageDescription, "ExcitationWavelength=\"488\"")) << stack.imageDescription.substr(0, 600);
+    const optics::TiffStackInfo expected = optics::readTiffStack(dir.path() / "stack.expected.ome.tif", false);
+    EXPECT_EQ(expected.pages, 3);
+    EXPECT_EQ(expected.sampleFormat, 3);
+}
+
+TEST(AcquireCli, BadMicroscopeInputIsRejected) {
+    TempDir dir;
+    const std::string out = (dir.path() / "s.ome.tif").string();
+    auto run = [&](const std::function<void(json&)>& edit) { return runCli(dir, {"acquire", beads(dir, edit).string(), "-o", out, "--spp", "1", "--planes", "1"}); };
+    auto r = run([](json& j) { j["microscope"]["objective"]["na"] = 1.4; });
+    EXPECT_EQ(r.exitCode, 2);
+    expectOneLineError(r, {"na 1.4", "immersion index 1.33"});
+    r = run([](json& j) { j["microscope"]["detector"]["exposure_s"] = 0; });
+    EXPECT_EQ(r.exitCode, 2);
+    expectOneLineError(r, {"microscope/detector", "exposure"});
+    r = run([](json& j) { j["microscope"]["detector"]["bit_depth"] = 20; });
+    EXPECT_EQ(r.exitCode, 2);
+    expectOneLineError(r, {"microscope/detector", "20"});
+    r = runCli(dir, {"acquire", beads(dir).string(), "-o", (dir.path() / "missing" / "s.ome.tif").string(), "--spp", "1", "--planes", "1"});
+    EXPECT_EQ(r.exitCode, 3);
+    expectOneLineError(r, {"missing", "does not exist"});
+}
+
+TEST(AcquireCli, BlockingFilterAndMissedSheetWarn) {
+    TempDir dir;
+    const std::string out = (dir.path() / "s.ome.tif").string();
+    auto r = runCli(dir, {"acquire", beads(dir, [](json& j) {
+                              j["microscope"]["channels"][0]["emission_filter"] = json{{"center", "420 nm"}, {"fwhm", "10 nm"}};
+                          }).string(),
+                          "-o", out, "--spp", "1", "--planes", "1"});
+    EXPECT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_TRUE(contains(r.err, "warning: channel \"AF488\"")) << r.err;
+    // The sheet 1 mm above the beads: every plane empty, said so, and the stack still written.
+    r = runCli(dir, {"acquire", beads(dir, [](json& j) { j["lights"][0]["center"] = {"0 mm", "0 mm", "1 mm"}; }).string(), "-o", out, "--spp", "1",
+                     "--planes", "2"});
+    EXPECT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_TRUE(contains(r.err, "plane 0: no signal")) << r.err;
+    EXPECT_TRUE(fs::exists(out));
+}
+
+TEST(ValidateLightSheetCli, FittedWidthsFollowTheGaussianBeam) {
+    TempDir dir;
+    const fs::path out = dir.path() / "sheet.json";
+    const auto r = runCli(dir, {"validate", "lightsheet", "--wavelength", "561", "--waist", "3", "--n", "1.33", "-o", out.string()});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const json j = json::parse(readFile(out));
+    const double zR = j.at("rayleigh_range_um").get<double>();
+    EXPECT_NEAR(zR, 3.14159265 * 9 * 1.33 / 0.561 * 1e-3 * 1e3, 1e-6 * zR);
+    const json& x = j.at("positions_um");
+    EXPECT_LE(x.front().get<double>(), -zR);
+    EXPECT_GE(x.back().get<double>(), zR);
+    for (size_t i = 0; i < x.size(); ++i) {
+        const double w = 3 * std::sqrt(1 + std::pow(x.at(i).get<double>() / zR, 2));
+        EXPECT_NEAR(j.at("widths_um").at(i).get<double>() / w, 1.0, 0.02) << "at x = " << x.at(i);
+    }
+}
+
+}  // namespace
+}  // namespace fluorosim
