@@ -2,6 +2,7 @@
 // through the sample, renders each plane's expected photoelectrons, applies the detector's noise and
 // writes a 16-bit OME-TIFF stack plus a float32 OME-TIFF of the expected photoelectrons.
 // The scene's "microscope" block (docs/optics.md) describes objective, detector, channels and stack.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -11,6 +12,7 @@
 #include "commands.h"
 #include "core/errors.h"
 #include "core/units.h"
+#include "io/image_io.h"
 #include "optics/acquisition.h"
 #include "optics/ome_tiff.h"
 #include "progress.h"
@@ -107,6 +109,39 @@ optics::DetectorOptions detectorOptions(const Field& d) {
         throw ConfigError("microscope/detector: " + std::string(e.what()));
     }
     return o;
+}
+
+// A preview PNG of the expected photoelectrons: the maximum projection along z (left) and the x-z
+// slice through the middle row (right, z stretched to the true aspect). Channel colours: green,
+// magenta, red, cyan; each channel scaled to its 99.5th percentile.
+void writeStackPreview(const fs::path& png, const std::vector<float>& e, int width, int height, int planes, int channels, double zOverPixel) {
+    static const float colours[4][3] = {{0, 1, 0}, {1, 0, 1}, {1, 0, 0}, {0, 1, 1}};
+    const int stretch = std::max(1, static_cast<int>(std::lround(zOverPixel)));
+    const int sliceRows = planes * stretch, gap = 4, outW = 2 * width + gap, outH = std::max(height, sliceRows);
+    std::vector<float> rgb(static_cast<size_t>(outW) * outH * 3, 0.0f);
+    const size_t plane = static_cast<size_t>(width) * height;
+    for (int c = 0; c < channels; ++c) {
+        const float* base = e.data() + static_cast<size_t>(c) * plane * planes;
+        std::vector<float> mip(plane, 0.0f);
+        for (int k = 0; k < planes; ++k)
+            for (size_t i = 0; i < plane; ++i) mip[i] = std::max(mip[i], base[k * plane + i]);
+        std::vector<float> sorted = mip;
+        std::sort(sorted.begin(), sorted.end());
+        const float scale = sorted[static_cast<size_t>(0.995 * (sorted.size() - 1))];
+        if (!(scale > 0)) continue;
+        const float* col = colours[c % 4];
+        auto put = [&](int x, int y, float v) {
+            const float t = std::min(1.0f, v / scale);
+            for (int k = 0; k < 3; ++k) rgb[(static_cast<size_t>(y) * outW + x) * 3 + k] += col[k] * t;
+        };
+        for (int y = 0; y < height; ++y)
+            for (int x = 0; x < width; ++x) put(x, y, mip[static_cast<size_t>(y) * width + x]);
+        for (int k = 0; k < planes; ++k)
+            for (int r = 0; r < stretch; ++r)
+                for (int x = 0; x < width; ++x) put(width + gap + x, k * stretch + r, base[k * plane + static_cast<size_t>(height / 2) * width + x]);
+    }
+    // The PNG writer applies the sRGB curve; these values are already display-scaled in [0, 1].
+    writePngPreview(png.string(), outW, outH, rgb, 1.0);
 }
 
 void runAcquire(const AcquireArgs& a) {
@@ -256,7 +291,9 @@ void runAcquire(const AcquireArgs& a) {
     optics::writeOmeTiffFloat32(expectedPath, width, height, planes, static_cast<int>(channels.size()), expected, meta);
     double maxE = 0;
     for (float e : expected) maxE = std::max(maxE, double(e));
-    const json summary = {{"stack", out.string()},          {"expected", expectedPath.string()}, {"planes", planes},
+    const fs::path preview = outText.substr(0, outText.size() - suffix.size()) + ".preview.png";
+    writeStackPreview(preview, expected, width, height, planes, static_cast<int>(channels.size()), meta.zStepUm / meta.pixelSizeUm);
+    const json summary = {{"stack", out.string()},          {"expected", expectedPath.string()}, {"preview", preview.string()}, {"planes", planes},
                           {"channels", channels.size()},     {"width", width},                    {"height", height},
                           {"pixel_size_um", meta.pixelSizeUm}, {"z_step_um", meta.zStepUm},       {"spp", spp},
                           {"seconds", seconds},              {"max_expected_electrons", maxE}};
