@@ -15,6 +15,7 @@
 #include "io/image_io.h"
 #include "optics/acquisition.h"
 #include "optics/ome_tiff.h"
+#include "output_checks.h"
 #include "progress.h"
 #include "scene_files.h"
 
@@ -232,8 +233,7 @@ void runAcquire(const AcquireArgs& a) {
     if (outText.size() <= suffix.size() || outText.compare(outText.size() - suffix.size(), suffix.size(), suffix) != 0)
         throw ConfigError(outText + ": output must end in .ome.tif");
     const fs::path expectedPath = outText.substr(0, outText.size() - suffix.size()) + ".expected.ome.tif";
-    const fs::path dir = out.has_parent_path() ? out.parent_path() : fs::path(".");
-    if (!fs::is_directory(dir)) throw IoError(outText + ": output folder \"" + dir.string() + "\" does not exist");
+    requireWritableFolder(out);
 
     const optics::Detector camera(detector);
     const size_t pixels = static_cast<size_t>(width) * height;

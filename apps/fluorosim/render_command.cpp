@@ -14,6 +14,7 @@
 #include "core/errors.h"
 #include "database.h"
 #include "io/image_io.h"
+#include "output_checks.h"
 #include "progress.h"
 #include "scene_files.h"
 #include "render/renderer.h"
@@ -37,14 +38,7 @@ struct RenderArgs {
 };
 
 void checkWritable(const fs::path& out) {
-    const fs::path dir = out.has_parent_path() ? out.parent_path() : fs::path(".");
-    if (!fs::is_directory(dir)) throw IoError(out.string() + ": output folder \"" + dir.string() + "\" does not exist");
-    // Probe the folder now rather than after an hour of rendering.
-    const fs::path probe = dir / (".fluorosim-write-test-" + std::to_string(::getpid()));
-    std::ofstream f(probe);
-    if (!f) throw IoError(out.string() + ": output folder \"" + dir.string() + "\" is not writable");
-    f.close();
-    fs::remove(probe);
+    requireWritableFolder(out);  // now rather than after an hour of rendering
     if (out.extension() != ".exr") throw ConfigError(out.string() + ": output must be an .exr file");
 }
 

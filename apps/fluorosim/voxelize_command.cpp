@@ -14,6 +14,7 @@
 #include "core/units.h"
 #include "database.h"
 #include "morphology/swc.h"
+#include "output_checks.h"
 #include "progress.h"
 #include "volume/voxelize.h"
 
@@ -40,15 +41,7 @@ void checkCount(const std::vector<std::string>& values, size_t files, const char
 
 void checkOutput(const fs::path& out) {
     if (out.extension() != ".vdb") throw ConfigError(out.string() + ": output must be a .vdb file");
-    if (fs::is_directory(out)) throw IoError(out.string() + ": is a folder");
-    const fs::path dir = out.has_parent_path() ? out.parent_path() : fs::path(".");
-    if (!fs::is_directory(dir)) throw IoError(out.string() + ": output folder \"" + dir.string() + "\" does not exist");
-    // Probe the folder now rather than after voxelizing.
-    const fs::path probe = dir / (".fluorosim-write-test-" + std::to_string(::getpid()));
-    std::ofstream f(probe);
-    if (!f) throw IoError(out.string() + ": output folder \"" + dir.string() + "\" is not writable");
-    f.close();
-    fs::remove(probe);
+    requireWritableFolder(out);
 }
 
 double positiveLength(const std::string& text, const char* option) {

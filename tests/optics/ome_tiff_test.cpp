@@ -1,6 +1,8 @@
 // OME-TIFF stacks: pixels and OME-XML read back through libtiff, XML escaping, the temporary file
 // and rename, and errors for bad stacks and unwritable paths.
 #include <gtest/gtest.h>
+
+#include "support/cli_runner.h"
 #include <unistd.h>
 
 #include <cstdlib>
@@ -18,26 +20,8 @@ namespace fluorosim::optics {
 namespace {
 namespace fs = std::filesystem;
 
-// A per-test temporary folder, removed at the end of the test.
-class TempDir {
-public:
-    TempDir() {
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        path_ = fs::temp_directory_path() / ("fluorosim_ometiff_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
-        fs::remove_all(path_);
-        fs::create_directories(path_);
-    }
-    ~TempDir() {
-        std::error_code ec;
-        fs::remove_all(path_, ec);
-    }
-    const fs::path& path() const { return path_; }
-
-private:
-    fs::path path_;
-};
-
-bool contains(const std::string& haystack, const std::string& needle) { return haystack.find(needle) != std::string::npos; }
+using fluorosim::testing::TempDir;
+using fluorosim::testing::contains;
 
 std::string unescape(const std::string& s) {
     static const std::vector<std::pair<std::string, std::string>> entities = {

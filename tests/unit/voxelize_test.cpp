@@ -3,6 +3,8 @@
 // analytic volume at a voxel of a fifth of the median radius, on a synthetic and on real
 // morphologies), the VDB file's grids, metadata and labels, and the `voxelize` command.
 #include <gtest/gtest.h>
+
+#include "support/cli_runner.h"
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -450,58 +452,16 @@ TEST(Voxelize, RejectsBadOptionsAndInputs) {
 
 // ---- the voxelize command ----
 
-std::string quote(const std::string& s) {
-    std::string q = "'";
-    for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-    return q + "'";
-}
-
-std::string readFile(const fs::path& p) {
-    std::ifstream in(p);
-    std::stringstream ss;
-    ss << in.rdbuf();
-    return ss.str();
-}
-
-struct CliRun {
-    int exitCode = -1;
-    std::string out, err;
+// A folder and the voxelize command, through the shared CLI runner.
+struct CliDir : testing::TempDir {
+    testing::RunResult run(const std::vector<std::string>& args) const {
+        std::vector<std::string> all{"voxelize"};
+        all.insert(all.end(), args.begin(), args.end());
+        return testing::runCli(*this, all);
+    }
 };
-
-class CliDir {
-public:
-    CliDir() {
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        path_ = fs::temp_directory_path() / ("fluorosim_voxcli_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
-        fs::remove_all(path_);
-        fs::create_directories(path_);
-    }
-    ~CliDir() {
-        std::error_code ec;
-        fs::remove_all(path_, ec);
-    }
-    const fs::path& path() const { return path_; }
-    fs::path write(const std::string& name, const std::string& text) const {
-        std::ofstream(path_ / name) << text;
-        return path_ / name;
-    }
-    CliRun run(const std::vector<std::string>& args) const {
-        std::string cmd = "timeout -k 5 120 " + quote(FLUOROSIM_CLI) + " voxelize";
-        for (const auto& a : args) cmd += " " + quote(a);
-        cmd += " </dev/null >" + quote((path_ / "stdout.txt").string()) + " 2>" + quote((path_ / "stderr.txt").string());
-        const int status = std::system(cmd.c_str());
-        CliRun r;
-        r.exitCode = status == -1 ? -1 : WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-        r.out = readFile(path_ / "stdout.txt");
-        r.err = readFile(path_ / "stderr.txt");
-        return r;
-    }
-
-private:
-    fs::path path_;
-};
-
-bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+using CliRun = testing::RunResult;
+using testing::contains;
 
 TEST(VoxelizeCli, TwoNeuronsTwoDyes) {
     const CliDir dir;
