@@ -238,6 +238,16 @@ double WidefieldIllumination::irradiance(const Vec3& p, int side, double) const 
 }
 
 std::shared_ptr<BeamProfile> makeLightSheet(const LightSheetSpec& spec) {
+    if (spec.widefield) {
+        WidefieldOptions w;
+        w.wavelengthNm = spec.wavelengthNm;
+        w.spectrum = spec.spectrum;
+        w.powerMw = spec.powerMw;
+        w.axis = spec.propagation;
+        w.centreMm = spec.centreMm;
+        w.fieldDiameterMm = spec.fieldDiameterMm;
+        return std::make_shared<WidefieldIllumination>(std::move(w));
+    }
     LightSheetOptions o;
     o.wavelengthNm = spec.wavelengthNm;
     o.spectrum = spec.spectrum;

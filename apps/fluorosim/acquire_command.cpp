@@ -39,6 +39,15 @@ struct Field {
     std::string path;
     [[noreturn]] void fail(const std::string& what) const { throw ConfigError("microscope" + path + ": " + what + " (got " + j.dump() + ")"); }
     bool has(const char* k) const { return j.is_object() && j.contains(k); }
+    // Every key must be one of `keys`: a misspelt field is an error, not a silent default.
+    void allowOnly(std::initializer_list<const char*> keys) const {
+        if (!j.is_object()) fail("expected an object");
+        for (auto it = j.begin(); it != j.end(); ++it) {
+            bool known = false;
+            for (const char* k : keys) known = known || it.key() == k;
+            if (!known) throw ConfigError("microscope" + path + ": unknown field \"" + it.key() + "\"");
+        }
+    }
     Field at(const char* k) const {
         if (!has(k)) throw ConfigError("microscope" + path + ": missing required field \"" + k + "\"");
         return {j.at(k), path + "/" + k};
@@ -88,6 +97,8 @@ optics::Filter emissionFilter(const Field& f, const spectra::Database& db) {
 }
 
 optics::DetectorOptions detectorOptions(const Field& d) {
+    d.allowOnly({"type", "pixel_pitch", "width", "height", "qe", "exposure_s", "gain_e_per_adu", "offset_adu", "read_noise_e",
+                 "dark_current_e_per_s", "full_well_e", "bit_depth", "em_gain"});
     optics::DetectorOptions o;
     if (d.has("type")) {
         const std::string t = d.at("type").str();
@@ -152,10 +163,16 @@ void runAcquire(const AcquireArgs& a) {
     if (scene.microscopeJson.empty()) throw ConfigError(a.scene + ": the scene has no \"microscope\" block (docs/optics.md)");
     const json mj = json::parse(scene.microscopeJson);
     const Field m{mj, ""};
+    m.allowOnly({"objective", "focus", "detector", "channels", "stack"});
+    // Channels switch lights on and off by index; emitting shapes keep indices of their own.
+    for (const Light& l : scene.lights)
+        if (std::holds_alternative<AreaLight>(l))
+            throw ConfigError(a.scene + ": acquire supports light sheets, widefield, point and spot lights, not emitting shapes");
     if (a.seed) scene.render.seed = *a.seed;
 
     optics::ObjectiveOptions objective;
     const Field obj = m.at("objective");
+    obj.allowOnly({"na", "magnification", "immersion_index", "working_distance"});
     objective.na = obj.at("na").number();
     objective.magnification = obj.at("magnification").number();
     if (obj.has("immersion_index")) objective.immersionIndex = obj.at("immersion_index").number();
@@ -171,6 +188,7 @@ void runAcquire(const AcquireArgs& a) {
     if (width < 1 || height < 1 || width > 8192 || height > 8192) det.fail("width and height must lie in [1, 8192]");
     optics::FocalPlane focus;
     const Field f = m.at("focus");
+    f.allowOnly({"center", "toward_objective", "up"});
     focus.centreMm = f.at("center").vec(Dimension::Length);
     if (f.has("toward_objective")) focus.towardObjective = normalize(f.at("toward_objective").vec(Dimension::Dimensionless));
     if (f.has("up")) focus.up = f.at("up").vec(Dimension::Dimensionless);
@@ -180,6 +198,7 @@ void runAcquire(const AcquireArgs& a) {
     double stepMm = 0.001;
     if (m.has("stack")) {
         const Field s = m.at("stack");
+        s.allowOnly({"planes", "step"});
         if (s.has("planes")) planes = static_cast<int>(s.at("planes").number());
         if (s.has("step")) stepMm = s.at("step").quantity(Dimension::Length);
     }
@@ -202,6 +221,7 @@ void runAcquire(const AcquireArgs& a) {
     if (!ch.j.is_array() || ch.j.empty()) ch.fail("expected a non-empty array of channels");
     for (size_t i = 0; i < ch.j.size(); ++i) {
         const Field c{ch.j.at(i), "/channels/" + std::to_string(i)};
+        c.allowOnly({"name", "emission_filter", "lights"});
         Channel out;
         out.name = c.at("name").str();
         out.filter = emissionFilter(c.at("emission_filter"), db);
@@ -217,6 +237,8 @@ void runAcquire(const AcquireArgs& a) {
         for (size_t l : out.lights)
             if (const auto lines = emissionSpectrum(scene.lights[l]).spectralLines(); !lines.empty() && out.excitationNm == 0)
                 out.excitationNm = lines[0].lambdaNm;
+        if (out.excitationNm == 0)
+            c.fail("its lights have no laser line; the stack's metadata needs an excitation wavelength");
         out.emissionNm = optics::measurePassBand(out.filter.curve()).centreNm();
         // A filter that passes almost none of a dye's emission is worth a warning, not an error.
         optics::FilterSet set{out.name, optics::Filter::open(), std::nullopt, out.filter};
@@ -253,7 +275,8 @@ void runAcquire(const AcquireArgs& a) {
             for (size_t l : channels[c].lights) scene.lights.push_back(allLights[l]);
             // The sheet and the focal plane move together along the detection axis.
             for (Light& l : scene.lights)
-                if (BeamLight* b = std::get_if<BeamLight>(&l)) b->profile->moveTo(offset * dot(normalize(b->spec.normal), focus.towardObjective));
+                if (BeamLight* b = std::get_if<BeamLight>(&l); b && !b->spec.widefield)
+                    b->profile->moveTo(offset * dot(normalize(b->spec.normal), focus.towardObjective));
             optics::FocalPlane plane = focus;
             plane.centreMm = focus.centreMm + focus.towardObjective * offset;
             optics::PlaneRenderOptions po;

@@ -23,8 +23,12 @@ public:
     virtual void moveTo(double offsetMm) = 0;
 };
 
-// What a scene file says about a light sheet, in internal units; optics turns it into a profile.
+// What a scene file says about a light sheet (or, with `widefield`, an epi-illumination field: a
+// uniform beam along `propagation` over a disc of `fieldDiameterMm` around `centreMm`), in internal
+// units; optics turns it into a profile.
 struct LightSheetSpec {
+    bool widefield = false;
+    double fieldDiameterMm = 0.5;
     std::optional<double> wavelengthNm;
     std::optional<Spectrum> spectrum;
     double powerMw = 1;

@@ -627,6 +627,8 @@ private:
                 scene.lights.emplace_back(std::move(p));
             } else if (type == "light_sheet") {
                 scene.lights.emplace_back(loadLightSheet(l));
+            } else if (type == "widefield") {
+                scene.lights.emplace_back(loadWidefield(l));
             } else if (type == "spot") {
                 l.allowOnly({"type", "position", "look_at", "intensity", "cone_angle_deg", "falloff_start_deg"});
                 const Vec3 pos = l.at("position").vec3(Dimension::Length);
@@ -671,6 +673,27 @@ private:
             spec.scanned = m == "scanned";
         }
         if (l.has("sides")) spec.dual = l.at("sides").integer(1, 2) == 2;
+        try {
+            return BeamLight{beams_(spec), spec};
+        } catch (const ConfigError& e) {
+            l.failQuoted(e.what());
+        }
+    }
+
+    // {"type": "widefield", "wavelength": "488 nm" (or "spectrum"), "power_mW": 1, "direction": [0, 0, -1],
+    //  "center": [...], "field_diameter": "0.5 mm"}: epi-illumination for comparison with the sheet.
+    BeamLight loadWidefield(const Node& l) {
+        l.allowOnly({"type", "wavelength", "spectrum", "power_mW", "direction", "center", "field_diameter"});
+        if (!beams_) l.fail("widefield lights need the optics library (this program cannot load them)");
+        LightSheetSpec spec;
+        spec.widefield = true;
+        if (l.has("wavelength") == l.has("spectrum")) l.fail("give exactly one of \"wavelength\" and \"spectrum\"");
+        if (l.has("wavelength")) spec.wavelengthNm = l.at("wavelength").positiveQuantity(Dimension::Wavelength);
+        else spec.spectrum = spectrum(l.at("spectrum"), SpectrumKind::Emission);
+        spec.powerMw = l.at("power_mW").number(0, 1e6, true);
+        spec.propagation = l.at("direction").vec3(Dimension::Dimensionless);
+        spec.centreMm = l.at("center").vec3(Dimension::Length);
+        spec.fieldDiameterMm = l.at("field_diameter").positiveQuantity(Dimension::Length);
         try {
             return BeamLight{beams_(spec), spec};
         } catch (const ConfigError& e) {

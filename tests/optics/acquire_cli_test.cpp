@@ -59,6 +59,9 @@ TEST(AcquireCli, BadMicroscopeInputIsRejected) {
     r = run([](json& j) { j["microscope"]["detector"]["bit_depth"] = 20; });
     EXPECT_EQ(r.exitCode, 2);
     expectOneLineError(r, {"microscope/detector", "20"});
+    r = run([](json& j) { j["microscope"]["detector"]["exposure"] = 0.1; });
+    EXPECT_EQ(r.exitCode, 2);
+    expectOneLineError(r, {"microscope/detector", "unknown field \"exposure\""});
     r = runCli(dir, {"acquire", beads(dir).string(), "-o", (dir.path() / "missing" / "s.ome.tif").string(), "--spp", "1", "--planes", "1"});
     EXPECT_EQ(r.exitCode, 3);
     expectOneLineError(r, {"missing", "does not exist"});
@@ -79,6 +82,27 @@ TEST(AcquireCli, BlockingFilterAndMissedSheetWarn) {
     EXPECT_EQ(r.exitCode, 0) << r.err;
     EXPECT_TRUE(contains(r.err, "plane 0: no signal")) << r.err;
     EXPECT_TRUE(fs::exists(out));
+}
+
+// Widefield epi-illumination (for comparison) lights every depth: a plane 2 µm above the highest bead
+// collects the beads' defocused light.
+TEST(AcquireCli, WidefieldLightsOutOfFocusBeads) {
+    TempDir dir;
+    const std::string out = (dir.path() / "s.ome.tif").string();
+    auto far = [](json& j) {
+        j["microscope"]["detector"]["width"] = j["microscope"]["detector"]["height"] = 64;  // the whole field of beads
+        j["microscope"]["focus"]["center"] = {"0 mm", "0 mm", "0.005 mm"};
+        j["lights"][0]["center"] = {"0 mm", "0 mm", "0.005 mm"};
+    };
+    const auto r = runCli(dir, {"acquire", beads(dir, [&](json& j) {
+                                   far(j);
+                                   j["lights"][0] = json{{"type", "widefield"}, {"wavelength", "488 nm"}, {"power_mW", 0.01},
+                                                         {"direction", {0, 0, -1}}, {"center", {"0 mm", "0 mm", "0 mm"}}, {"field_diameter", "0.1 mm"}};
+                               }).string(),
+                     "-o", out, "--spp", "16", "--planes", "1"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_FALSE(contains(r.err, "no signal")) << r.err;
+    EXPECT_GT(json::parse(r.out)["max_expected_electrons"].get<double>(), 1.0);
 }
 
 TEST(ValidateLightSheetCli, FittedWidthsFollowTheGaussianBeam) {
