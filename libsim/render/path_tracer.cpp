@@ -137,6 +137,16 @@ PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths&
     return trace(state, wl, rng, stats);
 }
 
+PathRadiance PathTracer::meanRadiance(const Vec3& p, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const {
+    ++stats.paths;
+    PathState state;
+    state.ray = Ray{p, Vec3(0, 0, 1)};
+    state.medium = medium;
+    state.prevScatter = p;
+    state.startsAtEmission = true;
+    return trace(state, wl, rng, stats);
+}
+
 SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double* channels, const SampledWavelengths& wl,
                                          const SampledSpectrum& weight, Rng& rng, PathStats& stats, int generation, int depth) const {
     // Generations are ended by roulette; this cap only guards the stack and is reported if reached.

@@ -49,6 +49,9 @@ public:
     explicit PathTracer(const Scene& scene) : scene_(scene), lights_(scene), fluorescence_(scene) {}
     // Radiance arriving along -ray.d at ray.o, for a ray that starts in `medium`.
     PathRadiance radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;
+    // (1/4π)∫ L dω at a point p in `medium`: the mean radiance that excites a dye there, estimated by a
+    // path that starts at p in an isotropic direction (as the fluorescence sub-paths do).
+    PathRadiance meanRadiance(const Vec3& p, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;
 
     // Transmittance from p0 to p1 through null interfaces and media; zero if a surface blocks. Exact in
     // homogeneous media, a ratio-tracking estimate in grid media: unbiased at every wavelength whose

@@ -122,5 +122,20 @@ TEST(ValidateLightSheetCli, FittedWidthsFollowTheGaussianBeam) {
     }
 }
 
+
+// In scattering tissue the light scattered out of the sheet builds up with depth: the contrast between
+// the sheet and 3 w(x) beside it falls (docs/validation.md, section 10, has the full plot).
+TEST(ValidateLightSheetCli, ScatteringLowersContrastWithDepth) {
+    TempDir dir;
+    const fs::path out = dir.path() / "depth.json";
+    const auto r = runCli(dir, {"validate", "lightsheet", "--wavelength", "488", "--waist", "5", "--sigma-s", "5/mm", "--samples", "1024",
+                                "--positions", "3", "-o", out.string()});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const json j = json::parse(readFile(out));
+    const json& c = j.at("contrast_at_3w");
+    EXPECT_GT(c.at(0).get<double>(), 10 * c.at(2).get<double>());
+    EXPECT_GT(j.at("fwhm_um").at(2).get<double>(), j.at("unscattered_fwhm_um").at(2).get<double>());
+}
+
 }  // namespace
 }  // namespace fluorosim
