@@ -31,6 +31,7 @@ struct AcquireArgs {
     std::optional<std::string> step;
     std::optional<uint64_t> seed;
     int threads = 0;
+    std::vector<std::string> channels;  // names to acquire (default: all)
 };
 
 // Field access that names the JSON path in every error.
@@ -78,7 +79,8 @@ struct Field {
     }
 };
 
-optics::Filter emissionFilter(const Field& f, const spectra::Database& db) {
+// A filter: a database name, {"center", "fwhm"} (band-pass) or {"long_pass": edge} (a dichroic).
+optics::Filter parseFilter(const Field& f, const spectra::Database& db) {
     if (f.j.is_string()) {
         try {
             return optics::Filter::fromDatabase(db, f.str());
@@ -86,6 +88,17 @@ optics::Filter emissionFilter(const Field& f, const spectra::Database& db) {
             f.fail(e.what());
         }
     }
+    if (f.has("long_pass")) {
+        f.allowOnly({"long_pass"});
+        optics::EdgeFilterOptions e;
+        e.edgeNm = f.at("long_pass").quantity(Dimension::Wavelength);
+        try {
+            return optics::Filter::longPass(e);
+        } catch (const ConfigError& err) {
+            f.fail(err.what());
+        }
+    }
+    f.allowOnly({"center", "fwhm"});
     optics::BandPassOptions b;
     b.centreNm = f.at("center").quantity(Dimension::Wavelength);
     b.fwhmNm = f.at("fwhm").quantity(Dimension::Wavelength);
@@ -122,6 +135,23 @@ optics::DetectorOptions detectorOptions(const Field& d) {
     }
     return o;
 }
+
+// A beam seen through a channel's excitation path (excitation filter, dichroic reflection).
+class FilteredBeam final : public BeamProfile {
+public:
+    FilteredBeam(std::shared_ptr<BeamProfile> beam, optics::FilterSet filters) : beam_(std::move(beam)), filters_(std::move(filters)) {}
+    int sides() const override { return beam_->sides(); }
+    Vec3 direction(int side) const override { return beam_->direction(side); }
+    double irradiance(const Vec3& p, int side, double lambdaNm) const override {
+        return beam_->irradiance(p, side, lambdaNm) * filters_.excitationPath(lambdaNm);
+    }
+    const Spectrum& spectrum() const override { return beam_->spectrum(); }
+    void moveTo(double offsetMm) override { beam_->moveTo(offsetMm); }
+
+private:
+    std::shared_ptr<BeamProfile> beam_;
+    optics::FilterSet filters_;
+};
 
 // A preview PNG of the expected photoelectrons: the maximum projection along z (left) and the x-z
 // slice through the middle row (right, z stretched to the true aspect). Channel colours: green,
@@ -213,7 +243,9 @@ void runAcquire(const AcquireArgs& a) {
     struct Channel {
         std::string name;
         std::vector<size_t> lights;
-        optics::Filter filter = optics::Filter::open();
+        optics::Filter filter = optics::Filter::open();  // the whole emission path
+        std::optional<optics::FilterSet> filters;
+        bool filteredExcitation = false;  // an excitation filter or a dichroic acts on the lights
         double excitationNm = 0, emissionNm = 0;
     };
     std::vector<Channel> channels;
@@ -221,10 +253,17 @@ void runAcquire(const AcquireArgs& a) {
     if (!ch.j.is_array() || ch.j.empty()) ch.fail("expected a non-empty array of channels");
     for (size_t i = 0; i < ch.j.size(); ++i) {
         const Field c{ch.j.at(i), "/channels/" + std::to_string(i)};
-        c.allowOnly({"name", "emission_filter", "lights"});
+        c.allowOnly({"name", "emission_filter", "excitation_filter", "dichroic", "lights"});
         Channel out;
         out.name = c.at("name").str();
-        out.filter = emissionFilter(c.at("emission_filter"), db);
+        // Emission path: dichroic transmission times emission filter; excitation path: excitation
+        // filter times dichroic reflection (a light-sheet's illumination arm has no dichroic: omit it).
+        optics::FilterSet filters{out.name, optics::Filter::open(), std::nullopt, parseFilter(c.at("emission_filter"), db)};
+        if (c.has("excitation_filter")) filters.excitation = parseFilter(c.at("excitation_filter"), db);
+        if (c.has("dichroic")) filters.dichroic = parseFilter(c.at("dichroic"), db);
+        out.filter = filters.dichroic ? optics::Filter(out.name + " emission path", filters.emissionPathCurve()) : filters.emission;
+        out.filters = filters;
+        out.filteredExcitation = c.has("excitation_filter") || c.has("dichroic");
         if (c.has("lights")) {
             for (const auto& l : c.at("lights").j) {
                 if (!l.is_number_integer() || l.get<int>() < 0 || static_cast<size_t>(l.get<int>()) >= scene.lights.size())
@@ -241,12 +280,17 @@ void runAcquire(const AcquireArgs& a) {
             c.fail("its lights have no laser line; the stack's metadata needs an excitation wavelength");
         out.emissionNm = optics::measurePassBand(out.filter.curve()).centreNm();
         // A filter that passes almost none of a dye's emission is worth a warning, not an error.
-        optics::FilterSet set{out.name, optics::Filter::open(), std::nullopt, out.filter};
         for (const Medium& med : scene.media)
             for (const DyeComponent& d : med.dyes())
-                if (const auto w = optics::emissionBlockingWarning(set, d.dye.emission(), d.dye.id()))
+                if (const auto w = optics::emissionBlockingWarning(*out.filters, d.dye.emission(), d.dye.id()))
                     std::fprintf(stderr, "fluorosim: warning: channel \"%s\": %s\n", out.name.c_str(), w->c_str());
-        channels.push_back(std::move(out));
+        if (a.channels.empty() || std::find(a.channels.begin(), a.channels.end(), out.name) != a.channels.end())
+            channels.push_back(std::move(out));
+    }
+    for (const std::string& want : a.channels) {
+        bool found = false;
+        for (const Channel& c : channels) found = found || c.name == want;
+        if (!found) throw ConfigError("--channels: no channel named \"" + want + "\" in the scene's microscope block");
     }
 
     fs::path out = a.output;
@@ -272,7 +316,13 @@ void runAcquire(const AcquireArgs& a) {
         for (int k = 0; k < planes; ++k) {
             const double offset = (k - 0.5 * (planes - 1)) * stepMm;
             scene.lights.clear();
-            for (size_t l : channels[c].lights) scene.lights.push_back(allLights[l]);
+            for (size_t l : channels[c].lights) {
+                Light light = allLights[l];
+                const optics::FilterSet& fs = *channels[c].filters;
+                if (BeamLight* b = std::get_if<BeamLight>(&light); b && channels[c].filteredExcitation)
+                    b->profile = std::make_shared<FilteredBeam>(b->profile, fs);
+                scene.lights.push_back(std::move(light));
+            }
             // The sheet and the focal plane move together along the detection axis.
             for (Light& l : scene.lights)
                 if (BeamLight* b = std::get_if<BeamLight>(&l); b && !b->spec.widefield)
@@ -335,6 +385,7 @@ void addAcquireCommand(CLI::App& app) {
     cmd->add_option("--spp", a->spp, "Samples per pixel");
     cmd->add_option("--seed", a->seed, "Random seed");
     cmd->add_option("--threads", a->threads, "Threads (0 = all cores)");
+    cmd->add_option("--channels", a->channels, "Channels to acquire, by name (default: all)")->delimiter(',');
     cmd->callback([a] { runAcquire(*a); });
 }
 

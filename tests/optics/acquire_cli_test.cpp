@@ -6,7 +6,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include "optics/filter.h"
 #include "optics/ome_tiff.h"
+#include "support/fluorescent_scenes.h"
 #include "support/cli_runner.h"
 
 namespace fluorosim {
@@ -30,7 +32,7 @@ fs::path beads(const TempDir& dir, const std::function<void(json&)>& edit = {}) 
 TEST(AcquireCli, WritesOmeTiffStacks) {
     TempDir dir;
     const fs::path out = dir.path() / "stack.ome.tif";
-    const auto r = runCli(dir, {"acquire", beads(dir).string(), "-o", out.string(), "--planes", "3", "--step", "1um", "--spp", "2"});
+    const auto r = runCli(dir, {"acquire", beads(dir).string(), "-o", out.string(), "--planes", "3", "--step", "1um", "--spp", "2", "--channels", "AF488"});
     ASSERT_EQ(r.exitCode, 0) << r.err;
     const json summary = json::parse(r.out);
     EXPECT_EQ(summary["planes"], 3);
@@ -59,6 +61,9 @@ TEST(AcquireCli, BadMicroscopeInputIsRejected) {
     r = run([](json& j) { j["microscope"]["detector"]["bit_depth"] = 20; });
     EXPECT_EQ(r.exitCode, 2);
     expectOneLineError(r, {"microscope/detector", "20"});
+    r = runCli(dir, {"acquire", beads(dir).string(), "-o", out, "--spp", "1", "--planes", "1", "--channels", "mCherry"});
+    EXPECT_EQ(r.exitCode, 2);
+    expectOneLineError(r, {"--channels", "\"mCherry\""});
     r = run([](json& j) { j["microscope"]["detector"]["exposure"] = 0.1; });
     EXPECT_EQ(r.exitCode, 2);
     expectOneLineError(r, {"microscope/detector", "unknown field \"exposure\""});
@@ -135,6 +140,54 @@ TEST(ValidateLightSheetCli, ScatteringLowersContrastWithDepth) {
     const json& c = j.at("contrast_at_3w");
     EXPECT_GT(c.at(0).get<double>(), 10 * c.at(2).get<double>());
     EXPECT_GT(j.at("fwhm_um").at(2).get<double>(), j.at("unscattered_fwhm_um").at(2).get<double>());
+}
+
+// Bleed-through between channels: an AF488 bead and an AF594 bead, a "green" channel (488 nm sheet,
+// 525/45) and a "red" one lit by both sheets at once (609/54). The AF488 bead shows up in the red
+// channel through its emission tail, in the ratio of the filters' overlap with its emission,
+// ∫ f T_609 / ∫ f T_525 (its absorption at 561 nm is about 0.3 % of that at 488 nm).
+TEST(AcquireCli, ChannelsShowBleedThroughBetweenDyes) {
+    TempDir dir;
+    json j = json::parse(readFile(kBeads));
+    j["shapes"] = json::array({json{{"type", "mesh"}, {"file", (kBeads.parent_path() / "bath.obj").string()}, {"unit", "um"}, {"interior", "water"}},
+                               json{{"type", "sphere"}, {"center", {"-0.005 mm", "0 mm", "0 mm"}}, {"radius", "0.2 um"}, {"interior", "green"}, {"exterior", "water"}},
+                               json{{"type", "sphere"}, {"center", {"0.005 mm", "0 mm", "0 mm"}}, {"radius", "0.2 um"}, {"interior", "red"}, {"exterior", "water"}}});
+    j["media"]["green"] = json{{"ior", 1.33}, {"dyes", json::array({json{{"dye", "AF488"}, {"concentration", "100 uM"}}})}};
+    j["media"]["red"] = json{{"ior", 1.33}, {"dyes", json::array({json{{"dye", "AF594"}, {"concentration", "100 uM"}}})}};
+    j["media"].erase("bead");
+    j["lights"][0]["waist"] = "3 um";
+    j["lights"].push_back(j["lights"][0]);
+    j["lights"][1]["wavelength"] = "561 nm";
+    j["microscope"]["detector"]["width"] = 48;
+    j["microscope"]["detector"]["height"] = 48;
+    j["microscope"]["channels"] = json::array({json{{"name", "green"}, {"emission_filter", "semrock_FF01-525-45"}, {"lights", {0}}},
+                                               json{{"name", "red"}, {"emission_filter", "semrock_FF01-609-54"}, {"lights", {0, 1}}}});
+    const fs::path scene = dir.write("two.json", j.dump());
+    const fs::path out = dir.path() / "two.ome.tif";
+    const auto r = runCli(dir, {"acquire", scene.string(), "-o", out.string(), "--planes", "1", "--spp", "256"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const optics::TiffStackInfo e = optics::readTiffStack(dir.path() / "two.expected.ome.tif", true);
+    ASSERT_EQ(e.pages, 2);
+    // Electrons above the dark level in the left half (the AF488 bead) of each channel.
+    const double dark = 0.5 * 0.01;
+    auto leftHalf = [&](int channel) {
+        double sum = 0;
+        for (int y = 0; y < 48; ++y)
+            for (int x = 0; x < 24; ++x) sum += e.pixels[static_cast<size_t>(channel) * 48 * 48 + y * 48 + x] - dark;
+        return sum;
+    };
+    const double green = leftHalf(0), red = leftHalf(1);
+    const Fluorophore af488 = databaseDye("AF488");
+    const optics::Filter f525 = optics::Filter::fromDatabase(database(), "semrock_FF01-525-45");
+    const optics::Filter f609 = optics::Filter::fromDatabase(database(), "semrock_FF01-609-54");
+    double in525 = 0, in609 = 0;
+    for (double l = 450; l < 750; l += 0.1) {
+        in525 += af488.emissionPdf(l) * f525.transmission(l);
+        in609 += af488.emissionPdf(l) * f609.transmission(l);
+    }
+    std::printf("  AF488 bead: green %.4g e-, red %.4g e-, bleed-through %.4f, spectral overlap ratio %.4f\n", green, red, red / green, in609 / in525);
+    EXPECT_GT(red, 0.01 * green);
+    EXPECT_NEAR(red / green, in609 / in525, 0.1 * in609 / in525);
 }
 
 }  // namespace
