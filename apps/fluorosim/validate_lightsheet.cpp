@@ -29,6 +29,24 @@ struct SheetArgs {
     std::string output;
 };
 
+// A cube [-half, half]³ (outward normals) as the interface around `medium`.
+void addMediumCube(Scene& scene, double half, int medium) {
+    TriangleMesh box;
+    const Vec3 lo(-half, -half, -half), d(2 * half, 2 * half, 2 * half);
+    auto face = [&](const Vec3& o, const Vec3& e1, const Vec3& e2) {
+        const uint32_t b = static_cast<uint32_t>(box.positions.size());
+        box.positions.insert(box.positions.end(), {o, o + e1, o + e1 + e2, o + e2});
+        box.indices.insert(box.indices.end(), {b, b + 1, b + 2, b, b + 2, b + 3});
+    };
+    const Vec3 ex(d.x, 0, 0), ey(0, d.y, 0), ez(0, 0, d.z);
+    face(lo, ey, ex), face(lo + ez, ex, ey), face(lo, ex, ez), face(lo + ey, ez, ex), face(lo, ez, ey), face(lo + ex, ey, ez);
+    scene.geometry.addMesh(std::move(box));
+    ShapeInfo s;
+    s.isInterface = true;
+    s.insideMedium = medium;
+    scene.shapes.push_back(s);
+}
+
 // Half-maximum width of a profile sampled at z (linear interpolation from the central maximum).
 double fullWidthHalfMax(const std::vector<double>& z, const std::vector<double>& v) {
     const size_t c = v.size() / 2;
@@ -52,20 +70,7 @@ void runScatteringDepth(const SheetArgs& a, double sigmaS) {
     scene.spectral.lambdaMin = 400;
     scene.spectral.lambdaMax = 700;
     scene.media.emplace_back("tissue", Spectrum::constant(0), Spectrum::constant(sigmaS), a.g, 1.0);
-    TriangleMesh box;
-    const Vec3 lo(-half, -half, -half), d(2 * half, 2 * half, 2 * half);
-    auto face = [&](const Vec3& o, const Vec3& e1, const Vec3& e2) {
-        const uint32_t b = static_cast<uint32_t>(box.positions.size());
-        box.positions.insert(box.positions.end(), {o, o + e1, o + e1 + e2, o + e2});
-        box.indices.insert(box.indices.end(), {b, b + 1, b + 2, b, b + 2, b + 3});
-    };
-    const Vec3 ex(d.x, 0, 0), ey(0, d.y, 0), ez(0, 0, d.z);
-    face(lo, ey, ex), face(lo + ez, ex, ey), face(lo, ex, ez), face(lo + ey, ez, ex), face(lo, ez, ey), face(lo + ex, ey, ez);
-    scene.geometry.addMesh(std::move(box));
-    ShapeInfo s;
-    s.isInterface = true;
-    s.insideMedium = 0;
-    scene.shapes.push_back(s);
+    addMediumCube(scene, half, 0);
     LightSheetSpec spec;
     spec.wavelengthNm = a.wavelength;
     spec.waistMm = w0;
@@ -130,20 +135,7 @@ void runLightSheet(const SheetArgs& a) {
     scene.spectral.lambdaMax = 700;
     const Fluorophore dye = db.fluorophore("AF488");
     scene.media.emplace_back("dye", Spectrum::constant(0), Spectrum::constant(0), 0.0, 1.0, std::vector<DyeComponent>{{dye, 1e-6}});
-    TriangleMesh box;
-    const Vec3 lo(-half, -half, -half), d(2 * half, 2 * half, 2 * half);
-    auto face = [&](const Vec3& o, const Vec3& e1, const Vec3& e2) {
-        const uint32_t b = static_cast<uint32_t>(box.positions.size());
-        box.positions.insert(box.positions.end(), {o, o + e1, o + e1 + e2, o + e2});
-        box.indices.insert(box.indices.end(), {b, b + 1, b + 2, b, b + 2, b + 3});
-    };
-    const Vec3 ex(d.x, 0, 0), ey(0, d.y, 0), ez(0, 0, d.z);
-    face(lo, ey, ex), face(lo + ez, ex, ey), face(lo, ex, ez), face(lo + ey, ez, ex), face(lo, ez, ey), face(lo + ex, ey, ez);
-    scene.geometry.addMesh(std::move(box));
-    ShapeInfo s;
-    s.isInterface = true;
-    s.insideMedium = 0;
-    scene.shapes.push_back(s);
+    addMediumCube(scene, half, 0);
     LightSheetSpec spec;
     spec.wavelengthNm = a.wavelength;
     spec.waistMm = w0;

@@ -646,6 +646,14 @@ private:
         }
     }
 
+    // A beam's "wavelength" (a laser line) or "spectrum", and its "power_mW".
+    void beamSpectrumAndPower(const Node& l, LightSheetSpec& spec) {
+        if (l.has("wavelength") == l.has("spectrum")) l.fail("give exactly one of \"wavelength\" and \"spectrum\"");
+        if (l.has("wavelength")) spec.wavelengthNm = l.at("wavelength").positiveQuantity(Dimension::Wavelength);
+        else spec.spectrum = spectrum(l.at("spectrum"), SpectrumKind::Emission);
+        spec.powerMw = l.at("power_mW").number(0, 1e6, true);
+    }
+
     // {"type": "light_sheet", "wavelength": "488 nm" (or "spectrum": ...), "power_mW": 10,
     //  "propagation": [1, 0, 0], "normal": [0, 0, 1], "center": [...], "waist": "2 um" (or
     //  "illumination_na": 0.05), "height": "0.5 mm", "refractive_index": 1.33,
@@ -655,10 +663,7 @@ private:
                      "refractive_index", "mode", "sides"});
         if (!beams_) l.fail("light sheets need the optics library (this program cannot load them)");
         LightSheetSpec spec;
-        if (l.has("wavelength") == l.has("spectrum")) l.fail("give exactly one of \"wavelength\" and \"spectrum\"");
-        if (l.has("wavelength")) spec.wavelengthNm = l.at("wavelength").positiveQuantity(Dimension::Wavelength);
-        else spec.spectrum = spectrum(l.at("spectrum"), SpectrumKind::Emission);
-        spec.powerMw = l.at("power_mW").number(0, 1e6, true);
+        beamSpectrumAndPower(l, spec);
         spec.propagation = l.at("propagation").vec3(Dimension::Dimensionless);
         spec.normal = l.at("normal").vec3(Dimension::Dimensionless);
         spec.centreMm = l.at("center").vec3(Dimension::Length);
@@ -687,10 +692,7 @@ private:
         if (!beams_) l.fail("widefield lights need the optics library (this program cannot load them)");
         LightSheetSpec spec;
         spec.widefield = true;
-        if (l.has("wavelength") == l.has("spectrum")) l.fail("give exactly one of \"wavelength\" and \"spectrum\"");
-        if (l.has("wavelength")) spec.wavelengthNm = l.at("wavelength").positiveQuantity(Dimension::Wavelength);
-        else spec.spectrum = spectrum(l.at("spectrum"), SpectrumKind::Emission);
-        spec.powerMw = l.at("power_mW").number(0, 1e6, true);
+        beamSpectrumAndPower(l, spec);
         spec.propagation = l.at("direction").vec3(Dimension::Dimensionless);
         spec.centreMm = l.at("center").vec3(Dimension::Length);
         spec.fieldDiameterMm = l.at("field_diameter").positiveQuantity(Dimension::Length);
