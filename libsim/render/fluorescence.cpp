@@ -148,6 +148,8 @@ FluorescencePlan::FluorescencePlan(const Scene& scene)
     : model_(scene.render.fluorescence), excitation_(makeExcitationSampler(scene, active_)) {
     if (model_ == FluorescenceModel::None) active_ = false;
     media_.resize(scene.media.size());
+    std::vector<double> featureSize(scene.media.size());  // scans the enclosing meshes once per medium
+    for (size_t m = 0; m < scene.media.size(); ++m) featureSize[m] = featureSizeMm(scene, static_cast<int>(m));
     bool anyDye = false;
     for (size_t m = 0; m < scene.media.size(); ++m)
         for (size_t i = 0; i < scene.media[m].dyes().size(); ++i) {
@@ -162,23 +164,23 @@ FluorescencePlan::FluorescencePlan(const Scene& scene)
             // Likewise a dyed homogeneous object much smaller than a millimetre (a 0.2 µm bead) gets at
             // least kGridBranchesPerVoxel branch points per diameter.
             double weight = kBranchBoost * dyePeakAbsorption(d.dye, 1.0);
-            weight = std::max(weight, kGridBranchesPerVoxel / (featureSizeMm(scene, m) * maxMolar(scene.media[m], i)));
+            weight = std::max(weight, kGridBranchesPerVoxel / (featureSize[m] * maxMolar(scene.media[m], i)));
             weight /= d.dye.emissionPdfMax();
             media_[m].dyes.push_back({&d.dye, kFirstDyeChannel + static_cast<int>(i), weight});
             anyDye = true;
         }
     for (size_t m = 0; m < scene.media.size(); ++m)
-        media_[m].branchCap = std::max(1.0, kGridBranchesPerVoxel / featureSizeMm(scene, static_cast<int>(m)));
+        media_[m].branchCap = std::max(1.0, kGridBranchesPerVoxel / featureSize[m]);
     active_ = active_ && anyDye;
 }
 
 double FluorescencePlan::branchDensityCap(int medium) const { return media_[static_cast<size_t>(medium)].branchCap; }
 
-double FluorescencePlan::branchDensity(int medium, const double* channels, double lambda) const {
-    double sum = 0;
+std::array<SampledSpectrum, kMaxMediumChannels> FluorescencePlan::branchDensityPerMolar(int medium, const SampledWavelengths& wl) const {
+    std::array<SampledSpectrum, kMaxMediumChannels> perChannel{};
     for (const DyeTerm& t : media_[static_cast<size_t>(medium)].dyes)
-        sum += channels[t.channel] * t.branchWeight * t.dye->emissionPdf(lambda);
-    return sum;
+        for (int j = 0; j < kNumWavelengths; ++j) perChannel[static_cast<size_t>(t.channel)][j] += t.branchWeight * t.dye->emissionPdf(wl.lambda[j]);
+    return perChannel;
 }
 
 double FluorescencePlan::kernel(int medium, const double* channels, double lambdaExcitation, double lambda) const {

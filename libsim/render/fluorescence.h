@@ -2,6 +2,7 @@
 // What the fluorescence estimator needs from a scene, computed once: which wavelengths camera paths
 // and excitation sub-paths must carry, how often a camera path branches into an excitation sub-path,
 // and the inelastic kernel. The derivation is in docs/model.md ("Fluorescence estimator").
+#include <array>
 #include <vector>
 
 #include "scene/scene.h"
@@ -24,14 +25,16 @@ public:
     bool active(int medium) const { return active_ && medium >= 0 && !media_[static_cast<size_t>(medium)].dyes.empty(); }
     FluorescenceModel model() const { return model_; }
 
-    // Density (1/mm) of fluorescence branch points along a camera path at `lambda`, at a point with
-    // the medium's channel values `channels` (concentrations c_i): 8 Σ_i σa,i(peak; c_i) f_i(λ)/max f_i
-    // (over dyes with Φ > 0). It is linear in the concentrations, so the medium's majorant grid bounds it. Added to the free-flight majorant as null density, and every tentative collision
-    // branches with probability branchDensity/majorant, so the source term is sampled even where the
-    // dye does not absorb at the camera's wavelength. Any positive choice is unbiased; this one follows
-    // the emission shape and the dye's strength.
-    double branchDensity(int medium, const double* channels, double lambda) const;
-    // The tracer uses min(branchDensity, max(σt, cap)): where the medium is dense its own collisions
+    // Density (1/mm) of fluorescence branch points along a camera path, per mol/L of each channel, at
+    // the sampled wavelengths (zero for channels without a dye that emits). At a point with channel
+    // values c the density is Σ_c c · this[c]: about 8 Σ_i σa,i(peak; c_i) f_i(λ)/max f_i over dyes
+    // with Φ > 0, raised for thin structures (see fluorescence.cpp). Linear in the concentrations, so
+    // the medium's majorant grid bounds it. The tracer samples branch points as a Poisson process of
+    // their own, so the source term is sampled even where the dye does not absorb at the camera's
+    // wavelength. Any positive choice is unbiased; this one follows the emission shape and the dye's
+    // strength.
+    std::array<SampledSpectrum, kMaxMediumChannels> branchDensityPerMolar(int medium, const SampledWavelengths& wl) const;
+    // The tracer uses min(branch density, max(σt, cap)): where the medium is dense its own collisions
     // suffice. 1/mm in homogeneous media; 4 per voxel length in grid media.
     double branchDensityCap(int medium) const;
 

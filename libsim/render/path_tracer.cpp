@@ -139,10 +139,18 @@ PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths&
 
 PathRadiance PathTracer::meanRadiance(const Vec3& p, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const {
     ++stats.paths;
+    return traceFromEmission(p, medium, wl, SampledSpectrum(1.0), 0, 0, rng, stats);
+}
+
+PathRadiance PathTracer::traceFromEmission(const Vec3& p, int medium, const SampledWavelengths& wl, const SampledSpectrum& beta, int depth,
+                                           int generation, Rng& rng, PathStats& stats) const {
     PathState state;
     state.ray = Ray{p, Vec3(0, 0, 1)};
     state.medium = medium;
+    state.beta = beta;
     state.prevScatter = p;
+    state.depth = depth;
+    state.generation = generation;
     state.startsAtEmission = true;
     return trace(state, wl, rng, stats);
 }
@@ -188,15 +196,7 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double
         if (const auto ls = lights_.sample(p, uLight, u1, u2, wlx); ls && ls->L && ls->pdf > 0)
             Lx = start * estimateTransmittance(p, ls->p, medium, wlx, rng, nullptr, 0.0, ls->beam).T * ls->L * (kInv4Pi / ls->pdf);
     } else {
-        PathState sub;
-        sub.ray = Ray{p, Vec3(0, 0, 1)};
-        sub.medium = medium;
-        sub.beta = start;
-        sub.prevScatter = p;
-        sub.depth = depth;
-        sub.generation = generation + 1;
-        sub.startsAtEmission = true;
-        Lx = trace(sub, wlx, rng, stats).total();
+        Lx = traceFromEmission(p, medium, wlx, start, depth, generation + 1, rng, stats).total();
     }
     SampledSpectrum result(0.0);
     for (int k = 0; k < kNumWavelengths; ++k) {
@@ -287,15 +287,8 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             // at that wavelength), so such paths never branch; this also ends every cascade there.
             const bool dyed = !wl.discrete && fluorescence_.active(medium);
             // Branch density per unit of each channel (it is linear in the concentrations).
-            std::array<SampledSpectrum, kMaxMediumChannels> branchPerChannel{};
-            if (dyed) {
-                ChannelValues unit{};
-                for (int c = kFirstDyeChannel; c < spec.channels; ++c) {
-                    unit[c] = 1;
-                    for (int j = 0; j < kNumWavelengths; ++j) branchPerChannel[c][j] = fluorescence_.branchDensity(medium, unit.data(), wl.lambda[j]);
-                    unit[c] = 0;
-                }
-            }
+            const std::array<SampledSpectrum, kMaxMediumChannels> branchPerChannel =
+                dyed ? fluorescence_.branchDensityPerMolar(medium, wl) : std::array<SampledSpectrum, kMaxMediumChannels>{};
             // Capped at max(σt, cap) (1/mm when homogeneous): where the medium is already dense its real collisions are enough,
             // and a concentrated dye (σa ~ 10^2-10^3 /mm) must not flood the path with branch points.
             // The same formula applied to a segment's channel maxima bounds it over the segment.
