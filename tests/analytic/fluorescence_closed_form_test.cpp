@@ -20,7 +20,11 @@ using namespace testing;
 // [a, b] nm (W m^-2 sr^-1):
 //   Φ σa(λx)/(4π) ∫_a^b f(λ) λx/λ ∫_0^d E(z) e^{-σa(λx)(d-z)} e^{-σa(λ) z} dz dλ,  E(z) = I / ((d+D-z) 1e-3 m)^2.
 // For σa d -> 0 this is the textbook Φ μa E f(λ) d / (4π) (times λx/λ, because our radiance is energy).
-// Re-absorbed and re-emitted light (second order in σa d, about 1e-3 here) is the only thing left out.
+// Re-absorbed and re-emitted light is the only thing left out. It is larger than σa d suggests: the
+// layer is 100 times wider than thick, so emission at grazing angles crosses millimetres of dye. The
+// full model reads 0.47-0.71 % above the closed form in the three bands (z up to +3.3 since the
+// branch density follows the layer's thickness), the paper model (one event) 0.13-0.33 % (z <= 1.6);
+// the full-minus-paper difference is that secondary fluorescence.
 double thinLayerReference(const Fluorophore& dye, double molar, double lambdaX, double I, double d, double D, double a, double b) {
     const double sx = dyeAbsorption(dye, lambdaX, molar);
     double total = 0;
