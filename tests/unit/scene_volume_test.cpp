@@ -7,7 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/errors.h"
-#include "database.h"
+#include "support/fluorescent_scenes.h"
 #include "scene/scene_loader.h"
 #include "volume/density_grid.h"
 
@@ -16,11 +16,6 @@ namespace {
 
 using json = nlohmann::json;
 namespace fs = std::filesystem;
-
-const spectra::Database& db() {
-    static const spectra::Database database(fs::path(FLUOROSIM_SOURCE_DIR) / "spectra" / "data");
-    return database;
-}
 
 const fs::path kDir = fs::temp_directory_path() / "fluorosim_scene_volume_test";
 const fs::path kScene = kDir / "scene.json";
@@ -47,8 +42,8 @@ json scene(const json& medium) {
 }
 
 Scene load(const json& j) {
-    const SpectrumResolver r = [](const std::string& ref, const fs::path& base) { return db().resolve(ref, base); };
-    const DyeResolver d = [](const std::string& n, std::optional<double> ec, std::optional<double> qy) { return db().fluorophore(n, ec, qy); };
+    const SpectrumResolver r = [](const std::string& ref, const fs::path& base) { return testing::database().resolve(ref, base); };
+    const DyeResolver d = [](const std::string& n, std::optional<double> ec, std::optional<double> qy) { return testing::database().fluorophore(n, ec, qy); };
     return loadSceneFromString(j.dump(), kScene, r, d);
 }
 
