@@ -7,7 +7,7 @@
 #include <cmath>
 #include <map>
 
-#include "database.h"
+#include "bench_support.h"
 #include "render/flux_sensor.h"
 #include "render/photon_tracer.h"
 #include "render/renderer.h"
@@ -17,10 +17,7 @@ namespace {
 
 using namespace fluorosim;
 
-const spectra::Database& db() {
-    static const spectra::Database d(std::string(FLUOROSIM_SOURCE_DIR) + "/spectra/data");
-    return d;
-}
+using bench::db;
 
 // 0: optical depth 10 (radius), two overlapping dyes; 1: optical depth 100, concentrated AF488.
 Scene ballScene(int which, FluorescenceModel model) {
@@ -105,28 +102,14 @@ struct VialsFixture {
     Scene full, paper;
     std::vector<float> reference;
     VialsFixture()
-        : full(load(FluorescenceModel::Full)), paper(load(FluorescenceModel::Paper)) { reference = fluorescentRgb(full, 1024, 999, nullptr); }
+        : full(load(FluorescenceModel::Full)), paper(load(FluorescenceModel::Paper)) {
+        reference = bench::renderFluorescentLayer(full, 1024, 999).rgb;
+    }
     static Scene load(FluorescenceModel model) {
-        Scene s = loadScene(std::string(FLUOROSIM_SOURCE_DIR) + "/samples/fluorescence/vials.json",
-                            [](const std::string& ref, const std::filesystem::path& base) { return db().resolve(ref, base); },
-                            [](const std::string& name, std::optional<double> ec, std::optional<double> qy) { return db().fluorophore(name, ec, qy); });
+        Scene s = bench::loadBenchScene(std::filesystem::path(FLUOROSIM_SOURCE_DIR) / "samples" / "fluorescence" / "vials.json");
         s.camera.width = s.camera.height = 64;
         s.render.fluorescence = model;
         return s;
-    }
-    static std::vector<float> fluorescentRgb(const Scene& scene, int spp, uint64_t seed, double* seconds) {
-        Film film(scene.camera.width, scene.camera.height, scene.spectral.lambdaMin, scene.spectral.lambdaMax, scene.spectral.binWidth,
-                  db().cie1931(), true);
-        RenderOptions opt;
-        opt.spp = spp;
-        opt.seed = seed;
-        opt.sppPerPass = spp;
-        const RenderSummary r = render(scene, film, opt);
-        if (seconds) *seconds = r.seconds;
-        const ExrImage img = film.image(spp);
-        for (const RgbLayer& l : img.rgbLayers)
-            if (l.prefix == "fluorescent") return l.rgb;
-        return {};
     }
 };
 
@@ -136,13 +119,9 @@ void BM_VialsFluorescentLayer(benchmark::State& state) {
     const int spp = static_cast<int>(state.range(1));
     double seconds = 0, rmse = 0;
     for (auto _ : state) {
-        const auto img = VialsFixture::fluorescentRgb(paper ? f.paper : f.full, spp, 7, &seconds);
-        double se = 0, refMean = 0;
-        for (size_t i = 0; i < img.size(); ++i) {
-            se += std::pow(static_cast<double>(img[i]) - f.reference[i], 2);
-            refMean += f.reference[i];
-        }
-        rmse = std::sqrt(se / static_cast<double>(img.size())) / (refMean / static_cast<double>(img.size()));
+        const bench::FluorescentRender r = bench::renderFluorescentLayer(paper ? f.paper : f.full, spp, 7);
+        seconds = r.summary.seconds;
+        rmse = bench::relativeRmse(r.rgb, f.reference);
     }
     state.counters["relative_rmse"] = rmse;
     state.counters["render_s"] = seconds;

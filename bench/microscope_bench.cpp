@@ -11,7 +11,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
-#include "database.h"
+#include "bench_support.h"
 #include "optics/acquisition.h"
 #include "optics/light_sheet.h"
 #include "scene/scene_loader.h"
@@ -21,10 +21,7 @@ namespace {
 using namespace fluorosim;
 namespace fs = std::filesystem;
 
-const spectra::Database& db() {
-    static const spectra::Database d(std::string(FLUOROSIM_SOURCE_DIR) + "/spectra/data");
-    return d;
-}
+using bench::db;
 
 const fs::path kScene = fs::path(FLUOROSIM_SOURCE_DIR) / "samples" / "lightsheet" / "neurons.json";
 
@@ -35,10 +32,7 @@ struct Setup {
     optics::Filter filter = optics::Filter::open();
     optics::DetectorOptions detector;
     Setup()
-        : scene(loadScene(
-              kScene, [](const std::string& ref, const fs::path& base) { return db().resolve(ref, base); },
-              [](const std::string& n, std::optional<double> ec, std::optional<double> qy) { return db().fluorophore(n, ec, qy); },
-              [](const LightSheetSpec& s) { return optics::makeLightSheet(s); })) {
+        : scene(bench::loadBenchScene(kScene)) {
         scene.lights.erase(scene.lights.begin());  // keep the 561 nm sheet
         const nlohmann::json m = nlohmann::json::parse(scene.microscopeJson);
         objective.na = m["objective"]["na"];
@@ -75,12 +69,7 @@ void BM_NeuronPlane(benchmark::State& state) {
     const int spp = static_cast<int>(state.range(0));
     for (auto _ : state) {
         const optics::PlaneResult r = setup().plane(spp, 7);
-        double se = 0, mean = 0;
-        for (size_t i = 0; i < r.electrons.size(); ++i) {
-            se += std::pow(r.electrons[i] - reference[i], 2);
-            mean += reference[i];
-        }
-        const double rmse = std::sqrt(se / double(r.electrons.size())) / (mean / double(r.electrons.size()));
+        const double rmse = bench::relativeRmse(r.electrons, reference);
         state.counters["relative_rmse"] = rmse;
         state.counters["seconds"] = r.seconds;
         state.counters["relMSE_x_s"] = rmse * rmse * r.seconds;

@@ -16,7 +16,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "database.h"
+#include "bench_support.h"
 #include "morphology/swc.h"
 #include "render/renderer.h"
 #include "scene/scene_loader.h"
@@ -27,10 +27,7 @@ namespace {
 using namespace fluorosim;
 namespace fs = std::filesystem;
 
-const spectra::Database& db() {
-    static const spectra::Database d(std::string(FLUOROSIM_SOURCE_DIR) + "/spectra/data");
-    return d;
-}
+using bench::relativeRmse;
 
 const fs::path kSamples = fs::path(FLUOROSIM_SOURCE_DIR) / "samples" / "neurons";
 const fs::path kWork = fs::temp_directory_path() / "fluorosim_volume_bench";
@@ -71,43 +68,12 @@ Scene neuronScene(const fs::path& vdb, int majorantCellVoxels) {
     j["camera"]["look_at"] = {"0 mm", "0 mm", "0 mm"};
     j["camera"]["fov_y_deg"] = 1.9;
     j["camera"]["resolution"] = {64, 64};
-    return loadSceneFromString(
-        j.dump(), kWork / "neurons.json", [](const std::string& ref, const fs::path& base) { return db().resolve(ref, base); },
-        [](const std::string& name, std::optional<double> ec, std::optional<double> qy) { return db().fluorophore(name, ec, qy); });
-}
-
-struct Rendered {
-    std::vector<float> fluorescent;
-    RenderSummary summary;
-};
-
-Rendered renderFluorescent(const Scene& scene, int spp, uint64_t seed, int threads) {
-    Film film(scene.camera.width, scene.camera.height, scene.spectral.lambdaMin, scene.spectral.lambdaMax, scene.spectral.binWidth,
-              db().cie1931(), true);
-    RenderOptions opt;
-    opt.spp = spp;
-    opt.seed = seed;
-    opt.sppPerPass = spp;
-    opt.threads = threads;
-    Rendered r;
-    r.summary = render(scene, film, opt);
-    for (const RgbLayer& l : film.image(spp).rgbLayers)
-        if (l.prefix == "fluorescent") r.fluorescent = l.rgb;
-    return r;
+    return bench::loadBenchScene(j.dump(), kWork / "neurons.json");
 }
 
 const std::vector<float>& reference() {
-    static const std::vector<float> ref = renderFluorescent(neuronScene(volumeFile(0.5), 0), 1024, 999, 0).fluorescent;
+    static const std::vector<float> ref = bench::renderFluorescentLayer(neuronScene(volumeFile(0.5), 0), 1024, 999, 0).rgb;
     return ref;
-}
-
-double relativeRmse(const std::vector<float>& img, const std::vector<float>& ref) {
-    double se = 0, mean = 0;
-    for (size_t i = 0; i < img.size(); ++i) {
-        se += std::pow(double(img[i]) - ref[i], 2);
-        mean += ref[i];
-    }
-    return std::sqrt(se / double(img.size())) / (mean / double(img.size()));
 }
 
 void countCollisions(benchmark::State& state, const RenderSummary& s) {
@@ -126,9 +92,9 @@ void BM_NeuronMajorant(benchmark::State& state) {
     const Scene scene = neuronScene(volumeFile(0.5), global ? -1 : 0);
     const std::vector<float>& ref = reference();
     for (auto _ : state) {
-        const Rendered r = renderFluorescent(scene, spp, 7, 1);
+        const bench::FluorescentRender r = bench::renderFluorescentLayer(scene, spp, 7, 1);
         countCollisions(state, r.summary);
-        const double e = relativeRmse(r.fluorescent, ref);
+        const double e = relativeRmse(r.rgb, ref);
         state.counters["relative_rmse"] = e;
         state.counters["relMSE_x_s"] = e * e * r.summary.seconds;
     }
@@ -140,7 +106,7 @@ void BM_NeuronResolution(benchmark::State& state) {
     const double voxelUm = double(state.range(0)) * 1e-3;
     const fs::path file = volumeFile(voxelUm);
     const Scene scene = neuronScene(file, 0);
-    for (auto _ : state) countCollisions(state, renderFluorescent(scene, 16, 7, 1).summary);
+    for (auto _ : state) countCollisions(state, bench::renderFluorescentLayer(scene, 16, 7, 1).summary);
     const VolumeFields* v = scene.media[0].volume();
     state.counters["vdb_MB"] = double(fs::file_size(file)) * 1e-6;
     state.counters["volume_MB"] = double(v->memoryBytes()) * 1e-6;
