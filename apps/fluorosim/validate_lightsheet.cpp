@@ -47,6 +47,16 @@ void addMediumCube(Scene& scene, double half, int medium) {
     scene.shapes.push_back(s);
 }
 
+// The sheet under test: static, single sided, focused at the origin, travelling along +x.
+void addStaticSheet(Scene& scene, const SheetArgs& a, double heightMm) {
+    LightSheetSpec spec;
+    spec.wavelengthNm = a.wavelength;
+    spec.waistMm = a.waistUm * 1e-3;
+    spec.refractiveIndex = a.n;
+    spec.heightMm = heightMm;
+    scene.lights.push_back(BeamLight{optics::makeLightSheet(spec), spec});
+}
+
 // Half-maximum width of a profile sampled at z (linear interpolation from the central maximum).
 double fullWidthHalfMax(const std::vector<double>& z, const std::vector<double>& v) {
     const size_t c = v.size() / 2;
@@ -71,12 +81,7 @@ void runScatteringDepth(const SheetArgs& a, double sigmaS) {
     scene.spectral.lambdaMax = 700;
     scene.media.emplace_back("tissue", Spectrum::constant(0), Spectrum::constant(sigmaS), a.g, 1.0);
     addMediumCube(scene, half, 0);
-    LightSheetSpec spec;
-    spec.wavelengthNm = a.wavelength;
-    spec.waistMm = w0;
-    spec.refractiveIndex = a.n;
-    spec.heightMm = 0.6;
-    scene.lights.push_back(BeamLight{optics::makeLightSheet(spec), spec});
+    addStaticSheet(scene, a, 0.6);
     scene.render.fluorescence = FluorescenceModel::None;
     scene.finalize();
     const PathTracer tracer(scene);
@@ -136,12 +141,7 @@ void runLightSheet(const SheetArgs& a) {
     const Fluorophore dye = db.fluorophore("AF488");
     scene.media.emplace_back("dye", Spectrum::constant(0), Spectrum::constant(0), 0.0, 1.0, std::vector<DyeComponent>{{dye, 1e-6}});
     addMediumCube(scene, half, 0);
-    LightSheetSpec spec;
-    spec.wavelengthNm = a.wavelength;
-    spec.waistMm = w0;
-    spec.refractiveIndex = a.n;
-    spec.heightMm = 1;
-    scene.lights.push_back(BeamLight{optics::makeLightSheet(spec), spec});
+    addStaticSheet(scene, a, 1.0);
     scene.finalize();
     const PathTracer tracer(scene);
     const LightSampler lights(scene);
