@@ -14,6 +14,7 @@
 #include "core/units.h"
 #include "core/math.h"
 #include "database.h"
+#include "output_checks.h"
 #include "optics/light_sheet.h"
 #include "render/path_tracer.h"
 #include "scene/light_sampler.h"
@@ -124,6 +125,7 @@ void runLightSheet(const SheetArgs& a) {
     if (!(a.waistUm > 0.1 && a.waistUm < 1000)) throw ConfigError("--waist: must lie in (0.1, 1000) um");
     if (!(a.n >= 1 && a.n < 3)) throw ConfigError("--n: must lie in [1, 3)");
     if (a.positions < 3 || a.positions > 101) throw ConfigError("--positions: must lie in [3, 101]");
+    requireWritableFolder(a.output);  // before a scattering run of minutes
     if (a.samples < 1 || a.samples > 1000000) throw ConfigError("--samples: must lie in [1, 1e6]");
     const double sigmaS = parseQuantity(a.sigmaS, Dimension::InverseLength, "--sigma-s");
     if (!(sigmaS >= 0) || sigmaS > 1e4) throw ConfigError("--sigma-s: must lie in [0, 1e4 /mm], got \"" + a.sigmaS + "\"");

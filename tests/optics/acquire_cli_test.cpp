@@ -128,6 +128,23 @@ TEST(ValidateLightSheetCli, FittedWidthsFollowTheGaussianBeam) {
 }
 
 
+TEST(ValidateLightSheetCli, BadArgumentsNameTheOption) {
+    TempDir dir;
+    const std::string out = (dir.path() / "s.json").string();
+    auto r = runCli(dir, {"validate", "lightsheet", "--wavelength", "488", "--waist", "0", "-o", out});
+    EXPECT_EQ(r.exitCode, 2);
+    expectOneLineError(r, {"--waist"});
+    r = runCli(dir, {"validate", "lightsheet", "--wavelength", "2000", "--waist", "2", "-o", out});
+    EXPECT_EQ(r.exitCode, 2);
+    expectOneLineError(r, {"--wavelength"});
+    r = runCli(dir, {"validate", "lightsheet", "--wavelength", "488", "--waist", "2", "--sigma-s", "-1/mm", "-o", out});
+    EXPECT_EQ(r.exitCode, 2);
+    expectOneLineError(r, {"--sigma-s", "-1/mm"});
+    r = runCli(dir, {"validate", "lightsheet", "--wavelength", "488", "--waist", "2", "-o", (dir.path() / "no" / "s.json").string()});
+    EXPECT_EQ(r.exitCode, 3);
+    expectOneLineError(r, {"does not exist"});
+}
+
 // In scattering tissue the light scattered out of the sheet builds up with depth: the contrast between
 // the sheet and 3 w(x) beside it falls (docs/validation.md, section 10, has the full plot).
 TEST(ValidateLightSheetCli, ScatteringLowersContrastWithDepth) {
