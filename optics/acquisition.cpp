@@ -71,32 +71,31 @@ PlaneResult renderPlane(const Scene& scene, const ObjectiveOptions& objective, c
                 const double px = (x + rng.uniform() - 0.5 * o.width) * pixelMm;
                 const double py = (0.5 * o.height - (static_cast<double>(y) + rng.uniform())) * pixelMm;
                 Vec3 focal = focus.centreMm + right * px + up * py;
-                // Diffraction: the focal point moves by a sample of the hero wavelength's Airy pattern;
-                // each wavelength is weighted by its own PSF over the mean of the four (one-sample MIS).
-                double psfWeight[kNumWavelengths] = {1, 1, 1, 1};
+                // Diffraction: the focal point moves by a sample of the hero wavelength's Airy pattern. Its
+                // density ratios p_j/p_0 and throughputs f_j/p_0 start the path, so the tracer's spectral
+                // MIS weighs the displacement together with the rest of the path.
+                PathStart pathStart;
                 if (o.diffraction) {
-                    const double r = airy.sampleRadiusMm(rng.uniform(), wl.lambda[0], objective.na);
+                    const double radius = airy.sampleRadiusMm(rng.uniform(), wl.lambda[0], objective.na);
                     const double a = 2 * kPi * rng.uniform();
-                    focal += (right * std::cos(a) + up * std::sin(a)) * r;
+                    focal += (right * std::cos(a) + up * std::sin(a)) * radius;
                     if (!wl.discrete) {
-                        double density[kNumWavelengths], mean = 0;
-                        for (int j = 0; j < kNumWavelengths; ++j) {
-                            density[j] = airy.densityPerMm2(r, wl.lambda[j], objective.na);
-                            mean += density[j] / kNumWavelengths;
-                        }
-                        for (int j = 0; j < kNumWavelengths; ++j) psfWeight[j] = mean > 0 ? density[j] / mean : 0.0;
+                        const double hero = airy.densityPerMm2(radius, wl.lambda[0], objective.na);
+                        for (int j = 1; j < kNumWavelengths; ++j)
+                            pathStart.r_u[j] = airy.densityPerMm2(radius, wl.lambda[j], objective.na) / hero;
+                        pathStart.beta = pathStart.r_u;
                     }
                 }
                 const double cosT = 1 - rng.uniform() * (1 - cosMax), phi = 2 * kPi * rng.uniform();
                 const double sinT = std::sqrt(std::max(0.0, 1 - cosT * cosT));
                 const Vec3 toObjective = frame.toWorld(Vec3(sinT * std::cos(phi), sinT * std::sin(phi), cosT));
                 const Ray ray{focal + toObjective * objective.workingDistanceMm, -toObjective};
-                const SampledSpectrum L = tracer.radiance(ray, scene.camera.medium, wl, rng, stats).total();
+                const SampledSpectrum L = tracer.radiance(ray, scene.camera.medium, wl, rng, stats, pathStart).total();
                 double e = 0;
                 for (int j = 0; j < kNumWavelengths; ++j) {
                     if (L[j] == 0 || wl.pdf[j] == 0) continue;
                     const double lambda = wl.lambda[j];
-                    e += psfWeight[j] * L[j] / wl.pdf[j] * emission.transmission(lambda) * detector.qe(lambda) * lambda / kPlanckTimesC;
+                    e += L[j] / wl.pdf[j] * emission.transmission(lambda) * detector.qe(lambda) * lambda / kPlanckTimesC;
                 }
                 e *= cosT * solidAngle * areaM2 * detector.exposureS / kNumWavelengths;
                 sum += e;
