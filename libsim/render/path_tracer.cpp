@@ -1,8 +1,10 @@
 #include "render/path_tracer.h"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 
+#include "core/errors.h"
 #include "core/math.h"
 #include "core/sampling.h"
 #include "media/free_flight.h"
@@ -22,6 +24,16 @@ SampledSpectrum clampZero(const SampledSpectrum& s) {
 }
 
 }  // namespace
+
+PathTracer::PathTracer(const Scene& scene)
+    : scene_(scene), lightList_(scene.lights), lights_(scene, lightList_), fluorescence_(scene, lightList_) {}
+
+PathTracer::PathTracer(const Scene& scene, std::vector<Light> lights)
+    : scene_(scene), lightList_(std::move(lights)), lights_(scene, lightList_), fluorescence_(scene, lightList_) {
+    const auto isArea = [](const Light& l) { return std::holds_alternative<AreaLight>(l); };
+    if (std::any_of(scene.lights.begin(), scene.lights.end(), isArea) || std::any_of(lightList_.begin(), lightList_.end(), isArea))
+        throw ConfigError("a separate light list cannot be used with emitting shapes (their lights are indexed by shape)");
+}
 
 int PathTracer::mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const Vec3& dir, int current) const {
     if (!shape.isInterface) return current;

@@ -55,7 +55,11 @@ struct PathStart {
 
 class PathTracer {
 public:
-    explicit PathTracer(const Scene& scene) : scene_(scene), lights_(scene), fluorescence_(scene) {}
+    explicit PathTracer(const Scene& scene);
+    // Renders with `lights` instead of the scene's (a microscope channel's lights at one plane): the
+    // scene stays untouched and shared. Throws ConfigError if the scene or `lights` has an area light
+    // (its shape's index would not match).
+    PathTracer(const Scene& scene, std::vector<Light> lights);
     // Radiance arriving along -ray.d at ray.o, for a ray that starts in `medium`.
     PathRadiance radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats,
                           const PathStart& start = {}) const;
@@ -71,6 +75,7 @@ public:
                                   const Vec3* surfaceNormal = nullptr, double surfaceEpsilon = 0.0) const;
 
     const FluorescencePlan& fluorescence() const { return fluorescence_; }
+    const std::vector<Light>& lights() const { return lightList_; }
 
 private:
     struct PathState;
@@ -95,6 +100,7 @@ private:
     int mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const Vec3& dir, int current) const;
 
     const Scene& scene_;
+    std::vector<Light> lightList_;
     LightSampler lights_;
     FluorescencePlan fluorescence_;
 };

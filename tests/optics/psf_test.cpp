@@ -91,12 +91,10 @@ TEST(AiryPattern, BeadInFocusHasTheDiffractionLimitedWidth) {
             objective.magnification = 6.5e-3 / pixel;
             objective.workingDistanceMm = 0.05;
             optics::DetectorOptions detector;
-            optics::PlaneRenderOptions o;
-            o.width = 25;
-            o.height = 1;
+            optics::AcquireOptions o;
             o.spp = na < 0.7 ? 240000 : 120000;
             o.seed = 9;
-            const optics::PlaneResult r = optics::renderPlane(scene, objective, optics::FocalPlane{}, optics::Filter::open(), detector, o);
+            const optics::PlaneImage r = optics::renderPlane(scene, objective, optics::FocalPlane{}, optics::Filter::open(), detector, 25, 1, o);
             std::vector<double> row(25);
             for (int x = 0; x < 25; ++x) row[x] = 0.5 * (r.electrons[x] + r.electrons[24 - x]);  // symmetric
 
@@ -155,13 +153,12 @@ TEST(AiryPattern, PsfAndPathWeightsShareOneSpectralMisWeight) {
         objective.magnification = 16;
         objective.immersionIndex = 1.0 / 0.9;  // a wide cone in air-like immersion
         optics::DetectorOptions detector;
-        optics::PlaneRenderOptions o;
-        o.width = o.height = 3;
+        optics::AcquireOptions o;
         o.spp = lines ? 200000 : 800000;
         o.seed = seed;
-        return optics::renderPlane(scene, objective, optics::FocalPlane{}, optics::Filter::open(), detector, o);
+        return optics::renderPlane(scene, objective, optics::FocalPlane{}, optics::Filter::open(), detector, 3, 3, o);
     };
-    const optics::PlaneResult mis = render(false, 3), reference = render(true, 4);
+    const optics::PlaneImage mis = render(false, 3), reference = render(true, 4);
     const std::vector<std::pair<const char*, std::vector<int>>> groups{{"centre", {4}}, {"edges", {1, 3, 5, 7}}, {"corners", {0, 2, 6, 8}}};
     for (const auto& [name, pixels] : groups) {
         double a = 0, b = 0, va = 0, vb = 0;
