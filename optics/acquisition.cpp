@@ -7,7 +7,9 @@
 #include "core/errors.h"
 #include "core/parallel.h"
 #include "core/rng.h"
+#include "core/sobol.h"
 #include "optics/psf.h"
+#include "render/direct_beam.h"
 #include "render/fluorescence.h"
 
 namespace fluorosim::optics {
@@ -23,14 +25,74 @@ uint64_t hashName(const std::string& s) {
 
 }  // namespace
 
+const char* estimatorName(Estimator e) { return e == Estimator::Path ? "path" : "split"; }
+
+std::optional<Estimator> estimatorFromName(const std::string& name) {
+    if (name == "path") return Estimator::Path;
+    if (name == "split") return Estimator::Split;
+    return std::nullopt;
+}
+
 void AcquireOptions::validate() const {
     if (spp < 1) throw ConfigError("spp must be at least 1, got " + std::to_string(spp));
+    if (directSpp < 1) throw ConfigError("direct samples per pixel must be at least 1, got " + std::to_string(directSpp));
     if (threads < 0) throw ConfigError("threads must be >= 0, got " + std::to_string(threads));
 }
 
 uint64_t planeStreamKey(const std::string& channelName, int plane) { return mixBits(hashName(channelName) + mixBits(static_cast<uint64_t>(plane) + 1)); }
 
 namespace {
+
+// Where a camera sample starts: the focal-plane point of a pixel, displaced by the PSF, and a
+// direction from the collection cone; the ray starts at the working distance on the objective's side.
+struct PlaneCamera {
+    Vec3 right, up, axis;
+    Frame frame;
+    double pixelMm, cosMax, na, workingDistanceMm;
+    double perSample;  // object pixel area (m²) × cone solid angle × exposure: the étendue of a sample
+    Vec3 centre;
+    int width, height;
+
+    PlaneCamera(const ObjectiveOptions& objective, const FocalPlane& focus, const DetectorOptions& detector, int w, int h)
+        : axis(normalize(focus.towardObjective)), width(w), height(h) {
+        right = normalize(cross(focus.up, axis));
+        up = cross(axis, right);
+        frame = Frame{right, up, axis};
+        pixelMm = detector.pixelPitchUm * 1e-3 / objective.magnification;
+        cosMax = std::cos(objective.collectionHalfAngle());
+        na = objective.na;
+        workingDistanceMm = objective.workingDistanceMm;
+        perSample = pixelMm * pixelMm * 1e-6 * 2 * kPi * (1 - cosMax) * detector.exposureS;
+        centre = focus.centreMm;
+    }
+    Vec3 focalPoint(int x, int y, double ux, double uy) const {
+        return centre + right * ((x + ux - 0.5 * width) * pixelMm) + up * ((0.5 * height - (y + uy)) * pixelMm);
+    }
+    Vec3 psfOffset(double radiusMm, double uAngle) const {
+        const double a = 2 * kPi * uAngle;
+        return (right * std::cos(a) + up * std::sin(a)) * radiusMm;
+    }
+    // The ray toward the focal point from the cone (uniform in solid angle); *cosTheta for the étendue.
+    Ray ray(const Vec3& focal, double uCos, double uPhi, double* cosTheta) const {
+        const double cosT = 1 - uCos * (1 - cosMax), phi = 2 * kPi * uPhi;
+        const double sinT = std::sqrt(std::max(0.0, 1 - cosT * cosT));
+        const Vec3 toObjective = frame.toWorld(Vec3(sinT * std::cos(phi), sinT * std::sin(phi), cosT));
+        *cosTheta = cosT;
+        return Ray{focal + toObjective * workingDistanceMm, -toObjective};
+    }
+};
+
+struct PixelTally {
+    double sum = 0, sum2 = 0;
+    int n = 0;
+    void add(double v) {
+        sum += v;
+        sum2 += v * v;
+        ++n;
+    }
+    double mean() const { return n ? sum / n : 0.0; }
+    double varianceOfMean() const { return n > 1 ? std::max(0.0, sum2 / n - sqr(sum / n)) / (n - 1) : 0.0; }
+};
 
 PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const ObjectiveOptions& objective, const FocalPlane& focus,
                       const Filter& emission, const DetectorOptions& detector, int width, int height, uint64_t streamKey,
@@ -42,46 +104,50 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
     if (width < 1 || height < 1) throw ConfigError("image size must be positive, got " + std::to_string(width) + " x " + std::to_string(height));
     const auto start = std::chrono::steady_clock::now();
     const WavelengthSampler wavelengths = cameraWavelengthSampler(scene, tracer.lights(), tracer.fluorescence().active());
-    const Vec3 w = normalize(focus.towardObjective);
-    const Vec3 right = normalize(cross(focus.up, w));
-    const Vec3 up = cross(w, right);
-    const double pixelMm = detector.pixelPitchUm * 1e-3 / objective.magnification;
-    const double cosMax = std::cos(objective.collectionHalfAngle());
-    const double solidAngle = 2 * kPi * (1 - cosMax);
-    // Étendue factor per sample: object pixel area (m²) × solid angle (uniform sampling) × exposure.
-    const double areaM2 = pixelMm * pixelMm * 1e-6;
-    const Frame frame{right, up, w};
+    const PlaneCamera camera(objective, focus, detector, width, height);
+    // Photoelectrons per unit of spectral radiance at λ: filter, QE and photons per joule.
+    const auto detection = [&](double lambda) { return emission.transmission(lambda) * detector.qe(lambda) * lambda / kPlanckTimesC; };
+    const bool split = o.estimator == Estimator::Split;
+    const DirectBeamEstimator direct(scene, tracer, detection);
+    const bool useDirect = split && direct.active();
+    // Dimensions: component, pixel area (2), PSF (2), cone (2), points along the core.
+    const std::optional<SobolTable> sobol = useDirect ? std::optional<SobolTable>(std::in_place, 8, o.directSpp) : std::nullopt;
     static const AiryPattern airy;
     PlaneImage r;
     r.width = width;
     r.height = height;
     r.electrons.assign(static_cast<size_t>(width) * height, 0.0);
     r.stderrElectrons.assign(r.electrons.size(), 0.0);
+    r.directStderr.assign(r.electrons.size(), 0.0);
+    r.pathStderr.assign(r.electrons.size(), 0.0);
     std::vector<PathStats> rowStats(static_cast<size_t>(height));
-    std::vector<double> rowLargest(static_cast<size_t>(height), 0.0);
+    std::vector<double> rowLargest(static_cast<size_t>(height), 0.0), rowDirect(static_cast<size_t>(height), 0.0),
+        rowPath(static_cast<size_t>(height), 0.0), rowDirectSeconds(static_cast<size_t>(height), 0.0),
+        rowPathSeconds(static_cast<size_t>(height), 0.0);
     std::vector<char> rowDone(static_cast<size_t>(height), 0);
     int rowsDone = 0;
     std::mutex progressMutex;  // the callback is called from one thread at a time
-    parallelFor(static_cast<size_t>(height), o.threads, [&](size_t y) {
+    parallelFor(static_cast<size_t>(height), o.threads, [&](size_t yRow) {
         if (o.cancel && o.cancel->load()) return;
-        PathStats& stats = rowStats[y];
+        const int y = static_cast<int>(yRow);
+        PathStats& stats = rowStats[yRow];
         for (int x = 0; x < width; ++x) {
-            const size_t pixel = y * static_cast<size_t>(width) + static_cast<size_t>(x);
-            double sum = 0, sum2 = 0;
+            const size_t pixel = yRow * static_cast<size_t>(width) + static_cast<size_t>(x);
+            PixelTally paths, directTally;
+            double directVariance = 0;
+            const auto t0 = std::chrono::steady_clock::now();
             for (int s = 0; s < o.spp; ++s) {
                 Rng rng = Rng::forKey(o.seed, streamKey + pixel, static_cast<uint64_t>(s));
                 const SampledWavelengths wl = wavelengths.sample(rng.uniform(), rng.uniform());
-                const double px = (x + rng.uniform() - 0.5 * width) * pixelMm;
-                const double py = (0.5 * height - (static_cast<double>(y) + rng.uniform())) * pixelMm;
-                Vec3 focal = focus.centreMm + right * px + up * py;
+                Vec3 focal = camera.focalPoint(x, y, rng.uniform(), rng.uniform());
                 // Diffraction: the focal point moves by a sample of the hero wavelength's Airy pattern. Its
                 // density ratios p_j/p_0 and throughputs f_j/p_0 start the path, so the tracer's spectral
                 // MIS weighs the displacement together with the rest of the path.
                 PathStart pathStart;
+                pathStart.directBeamsSeparate = useDirect;
                 if (o.diffraction) {
                     const double radius = airy.sampleRadiusMm(rng.uniform(), wl.lambda[0], objective.na);
-                    const double a = 2 * kPi * rng.uniform();
-                    focal += (right * std::cos(a) + up * std::sin(a)) * radius;
+                    focal += camera.psfOffset(radius, rng.uniform());
                     if (!wl.discrete) {
                         const double hero = airy.densityPerMm2(radius, wl.lambda[0], objective.na);
                         for (int j = 1; j < kNumWavelengths; ++j)
@@ -89,27 +155,49 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                         pathStart.beta = pathStart.r_u;
                     }
                 }
-                const double cosT = 1 - rng.uniform() * (1 - cosMax), phi = 2 * kPi * rng.uniform();
-                const double sinT = std::sqrt(std::max(0.0, 1 - cosT * cosT));
-                const Vec3 toObjective = frame.toWorld(Vec3(sinT * std::cos(phi), sinT * std::sin(phi), cosT));
-                const Ray ray{focal + toObjective * objective.workingDistanceMm, -toObjective};
+                double cosT = 0;
+                const Ray ray = camera.ray(focal, rng.uniform(), rng.uniform(), &cosT);
                 const SampledSpectrum L = tracer.radiance(ray, scene.camera.medium, wl, rng, stats, pathStart).total();
                 double e = 0;
-                for (int j = 0; j < kNumWavelengths; ++j) {
-                    if (L[j] == 0 || wl.pdf[j] == 0) continue;
-                    const double lambda = wl.lambda[j];
-                    e += L[j] / wl.pdf[j] * emission.transmission(lambda) * detector.qe(lambda) * lambda / kPlanckTimesC;
-                }
-                e *= cosT * solidAngle * areaM2 * detector.exposureS / kNumWavelengths;
-                sum += e;
-                sum2 += e * e;
-                rowLargest[y] = std::max(rowLargest[y], e);
+                for (int j = 0; j < kNumWavelengths; ++j)
+                    if (L[j] != 0 && wl.pdf[j] != 0) e += L[j] / wl.pdf[j] * detection(wl.lambda[j]);
+                e *= cosT * camera.perSample / kNumWavelengths;
+                paths.add(e);
+                rowLargest[yRow] = std::max(rowLargest[yRow], e);
             }
-            const double n = o.spp;
-            r.electrons[pixel] = sum / n;
-            r.stderrElectrons[pixel] = n > 1 ? std::sqrt(std::max(0.0, sum2 / n - sqr(sum / n)) / (n - 1)) : 0.0;
+            const auto t1 = std::chrono::steady_clock::now();
+            // The direct part: Owen-scrambled Sobol' points over the component, the pixel area, the PSF,
+            // the cone and the points along the core, scrambled per pixel; transmittances from a stream
+            // keyed apart from the paths'.
+            if (useDirect) {
+                const uint64_t scramble = mixBits(o.seed ^ mixBits(streamKey + pixel));
+                DirectBeamEstimator::Pixel points;
+                for (int s = 0; s < o.directSpp; ++s) {
+                    auto u = [&](int dim) { return sobol->sample(s, dim, scramble); };
+                    const DirectBeamEstimator::Component c = direct.sampleComponent(u(0));
+                    Vec3 focal = camera.focalPoint(x, y, u(1), u(2));
+                    if (o.diffraction) focal += camera.psfOffset(airy.sampleRadiusMm(u(3), c.lambdaNm, objective.na), u(4));
+                    double cosT = 0;
+                    const Ray ray = camera.ray(focal, u(5), u(6), &cosT);
+                    direct.addSample(points, ray, scene.camera.medium, c, u(7), cosT * camera.perSample);
+                }
+                Rng rng = Rng::forKey(o.seed, mixBits(streamKey + pixel) ^ 0x5DEECE66DULL, 0);
+                const DirectBeamEstimator::Estimate d = direct.finish(points, o.directPicks, rng.uniform(), rng);
+                directTally.sum = d.mean;
+                directTally.n = 1;
+                directVariance = d.variance;
+            }
+            const auto t2 = std::chrono::steady_clock::now();
+            rowPathSeconds[yRow] += std::chrono::duration<double>(t1 - t0).count();
+            rowDirectSeconds[yRow] += std::chrono::duration<double>(t2 - t1).count();
+            r.directStderr[pixel] = std::sqrt(directVariance);
+            r.pathStderr[pixel] = std::sqrt(paths.varianceOfMean());
+            r.electrons[pixel] = paths.mean() + directTally.mean();
+            r.stderrElectrons[pixel] = std::sqrt(paths.varianceOfMean() + directVariance);
+            rowDirect[yRow] += directTally.mean();
+            rowPath[yRow] += paths.mean();
         }
-        rowDone[y] = 1;
+        rowDone[yRow] = 1;
         const std::lock_guard<std::mutex> lock(progressMutex);
         ++rowsDone;
         if (o.progress) o.progress(double(rowsDone) / height);
@@ -118,6 +206,10 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         r.stats.add(rowStats[y]);
         r.largestSample = std::max(r.largestSample, rowLargest[y]);
         r.complete = r.complete && rowDone[y];
+        r.directElectrons += rowDirect[y];
+        r.pathElectrons += rowPath[y];
+        r.directSeconds += rowDirectSeconds[y];
+        r.pathSeconds += rowPathSeconds[y];
     }
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return r;

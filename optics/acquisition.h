@@ -24,8 +24,17 @@
 
 namespace fluorosim::optics {
 
+// Path: every sample is a full path (the reference). Split: the unscattered light of the beams' cores
+// (render/direct_beam.h) gets its own low-variance samples, and paths estimate the rest.
+enum class Estimator { Path, Split };
+const char* estimatorName(Estimator e);
+std::optional<Estimator> estimatorFromName(const std::string& name);
+
 struct AcquireOptions {
-    int spp = 16;
+    Estimator estimator = Estimator::Split;
+    int spp = 16;          // path samples per pixel
+    int directSpp = 64;    // samples of the direct part per pixel (split estimator)
+    int directPicks = 16;  // transmittance estimates per pixel for the direct part
     uint64_t seed = 1;
     int threads = 0;          // 0: all cores
     bool diffraction = true;  // the Airy PSF; off gives the geometric image
@@ -42,6 +51,11 @@ struct PlaneImage {
     double seconds = 0;
     double largestSample = 0;  // a diagnostic of heavy tails: the largest single path's electrons
     bool complete = true;      // false when cancelled before every row was done
+    // Split estimator: the direct part and the paths' part, summed over pixels, and each part's
+    // standard error per pixel (diagnostics: which part needs the samples).
+    double directElectrons = 0, pathElectrons = 0;
+    std::vector<double> directStderr, pathStderr;
+    double directSeconds = 0, pathSeconds = 0;  // thread time spent on each part
 };
 
 // Random streams of a plane, keyed by the channel's name (not its position in a filtered list) and

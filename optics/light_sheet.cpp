@@ -203,6 +203,30 @@ double LightSheet::irradiance(const Vec3& p, int side, double lambdaNm) const {
     return sidePowerW_ * across * along;
 }
 
+bool LightSheet::inCore(const Vec3& p, int side, double lambdaNm) const {
+    checkSide(side, sides(), "light sheet");
+    const SheetCoordinates c = local(p);
+    return std::abs(c.z) <= kCoreWidths * waistAt(c.x, lambdaNm);
+}
+
+BeamCore LightSheet::coreAlong(const Ray& ray, int side, double lambdaNm) const {
+    checkSide(side, sides(), "light sheet");
+    // z(t)² <= k² w0² (1 + x(t)²/zR²) with x(t) = x0 + t dx, z(t) = z0 + t dz.
+    const SheetCoordinates o = local(ray.o);
+    const double dx = dot(ray.d, u_), dz = dot(ray.d, n_);
+    const double a = kCoreWidths * waistMm(lambdaNm), b = a / rayleighRangeMm(lambdaNm);
+    BeamCore core = quadraticCore(dz * dz - b * b * dx * dx, 2 * (o.z * dz - b * b * o.x * dx), o.z * o.z - a * a - b * b * o.x * o.x);
+    if (std::abs(dz) > 0) {
+        // Across the sheet the profile is exp(-2 z²/w²): a normal density of z with deviation w/2.
+        const double tc = -o.z / dz;
+        for (int i = 0; i < core.count; ++i) {
+            core.intervals[static_cast<size_t>(i)].centre = tc;
+            core.intervals[static_cast<size_t>(i)].sigma = 0.5 * waistAt(o.x + tc * dx, lambdaNm) / std::abs(dz);
+        }
+    }
+    return core;
+}
+
 void WidefieldOptions::validate() const {
     normalisedIlluminationSpectrum(wavelengthNm, spectrum, "widefield");
     requirePositive(powerMw, "widefield powerMw", " mW");
@@ -229,6 +253,15 @@ double WidefieldIllumination::irradiance(const Vec3& p, int side, double) const 
     const Vec3 d = p - options_.centreMm;
     const Vec3 radial = d - axis_ * dot(d, axis_);
     return dot(radial, radial) <= radiusMm_ * radiusMm_ ? irradianceWPerMm2_ : 0.0;
+}
+
+bool WidefieldIllumination::inCore(const Vec3& p, int side, double lambdaNm) const { return irradiance(p, side, lambdaNm) > 0; }
+
+BeamCore WidefieldIllumination::coreAlong(const Ray& ray, int side, double) const {
+    checkSide(side, 1, "widefield");
+    const Vec3 o = ray.o - options_.centreMm;
+    const Vec3 orad = o - axis_ * dot(o, axis_), drad = ray.d - axis_ * dot(ray.d, axis_);
+    return quadraticCore(dot(drad, drad), 2 * dot(orad, drad), dot(orad, orad) - radiusMm_ * radiusMm_);
 }
 
 std::shared_ptr<BeamProfile> makeLightSheet(const LightSheetSpec& spec) {

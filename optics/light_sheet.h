@@ -143,6 +143,11 @@ public:
     Vec3 direction(int side) const override;
     double irradiance(const Vec3& p, int side, double lambdaNm) const override;
     const Spectrum& spectrum() const override { return spectrum_; }
+    // Core: |z| <= kCoreWidths w(x), where the irradiance is at least e^-32 of the peak at that x.
+    // Along a ray it is a quadric condition in t; the proposal is the Gaussian across the sheet.
+    static constexpr double kCoreWidths = 4;
+    bool inCore(const Vec3& p, int side, double lambdaNm) const override;
+    BeamCore coreAlong(const Ray& ray, int side, double lambdaNm) const override;
 
     // Waist w0 at λ (the given waist, or from the NA), zR and the 1/e² half-width w(x) at λ.
     double waistMm(double lambdaNm) const;
@@ -189,6 +194,9 @@ public:
     Vec3 direction(int side) const override;
     double irradiance(const Vec3& p, int side, double lambdaNm) const override;
     const Spectrum& spectrum() const override { return spectrum_; }
+    // Core: the whole illuminated cylinder (the field does not fall off with depth); uniform proposal.
+    bool inCore(const Vec3& p, int side, double lambdaNm) const override;
+    BeamCore coreAlong(const Ray& ray, int side, double lambdaNm) const override;
 
 private:
     WidefieldOptions options_;

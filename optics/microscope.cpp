@@ -24,6 +24,10 @@ public:
     Vec3 direction(int side) const override { return beam_->direction(side); }
     double irradiance(const Vec3& p, int side, double lambdaNm) const override { return beam_->irradiance(p - shift_, side, lambdaNm); }
     const Spectrum& spectrum() const override { return beam_->spectrum(); }
+    bool inCore(const Vec3& p, int side, double lambdaNm) const override { return beam_->inCore(p - shift_, side, lambdaNm); }
+    BeamCore coreAlong(const Ray& ray, int side, double lambdaNm) const override {
+        return beam_->coreAlong(Ray{ray.o - shift_, ray.d}, side, lambdaNm);
+    }
 
 private:
     std::shared_ptr<BeamProfile> beam_;
@@ -40,6 +44,8 @@ public:
         return beam_->irradiance(p, side, lambdaNm) * filters_.excitationPath(lambdaNm);
     }
     const Spectrum& spectrum() const override { return beam_->spectrum(); }
+    bool inCore(const Vec3& p, int side, double lambdaNm) const override { return beam_->inCore(p, side, lambdaNm); }
+    BeamCore coreAlong(const Ray& ray, int side, double lambdaNm) const override { return beam_->coreAlong(ray, side, lambdaNm); }
 
 private:
     std::shared_ptr<BeamProfile> beam_;

@@ -2,6 +2,7 @@
 // API. The scene's "microscope" block (docs/optics.md) describes objective, detector, channels and
 // stack. Every finished plane goes to STACK.checkpoint at once; SIGINT or SIGTERM stops within a row,
 // writes the complete planes, and `--resume` continues to the same result as an uninterrupted run.
+#include <algorithm>
 #include <atomic>
 #include <csignal>
 #include <cstdio>
@@ -29,7 +30,8 @@ extern "C" void onAcquireSignal(int) { gCancel.store(true); }
 
 struct AcquireArgs {
     std::string scene, output;
-    std::optional<int> planes, spp;
+    std::optional<int> planes, spp, directSpp;
+    std::string estimator = "split";
     std::optional<std::string> step;
     std::optional<int64_t> seed;
     int threads = 0;
@@ -47,8 +49,15 @@ std::string fingerprint(const AcquireArgs& a, const optics::Microscope& m, const
     nlohmann::json channels = nlohmann::json::array();
     for (size_t c : stack.channels) channels.push_back(m.channels[c].name);
     const nlohmann::json j = {{"scene_fnv1a", h}, {"seed", o.seed}, {"spp", o.spp}, {"planes", m.stack.planes}, {"step_mm", m.stack.stepMm},
-                              {"channels", channels}, {"diffraction", o.diffraction}};
+                              {"channels", channels}, {"diffraction", o.diffraction}, {"estimator", optics::estimatorName(o.estimator)},
+                              {"direct_spp", o.directSpp}};
     return j.dump();
+}
+
+double median(std::vector<double> v) {
+    if (v.empty()) return 0.0;
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    return v[v.size() / 2];
 }
 
 void runAcquire(const AcquireArgs& a) {
@@ -71,6 +80,14 @@ void runAcquire(const AcquireArgs& a) {
     o.spp = a.spp.value_or(scene.render.spp);
     if (o.spp < 1 || o.spp > (1 << 24)) throw ConfigError("--spp: must lie in [1, 16777216], got " + std::to_string(o.spp));
     o.seed = a.seed ? static_cast<uint64_t>(*a.seed) : scene.render.seed;
+    const auto estimator = optics::estimatorFromName(a.estimator);
+    if (!estimator) throw ConfigError("--estimator: expected \"split\" or \"path\", got \"" + a.estimator + "\"");
+    o.estimator = *estimator;
+    if (a.directSpp) {
+        if (*a.directSpp < 1 || *a.directSpp > (1 << 24))
+            throw ConfigError("--direct-spp: must lie in [1, 16777216], got " + std::to_string(*a.directSpp));
+        o.directSpp = *a.directSpp;
+    }
     o.threads = a.threads;
     o.cancel = &gCancel;
 
@@ -109,12 +126,25 @@ void runAcquire(const AcquireArgs& a) {
     optics::StackCallbacks cb;
     cb.progress = [&](double f) { bar.update(f); };
     PathStats stats;
-    double seconds = 0, largest = 0;
+    double seconds = 0, largest = 0, directSum = 0, pathSum = 0, directSeconds = 0, pathSeconds = 0;
+    std::vector<double> directRel, pathRel;  // relative standard errors of each part over the brightest pixels
     cb.planeDone = [&](size_t slot, int plane, const optics::PlaneImage& image) {
         checkpoint->append(slot, plane, image);
         stats.add(image.stats);
         seconds += image.seconds;
         largest = std::max(largest, image.largestSample);
+        directSum += image.directElectrons;
+        pathSum += image.pathElectrons;
+        directSeconds += image.directSeconds;
+        pathSeconds += image.pathSeconds;
+        std::vector<double> sorted = image.electrons;
+        std::sort(sorted.begin(), sorted.end());
+        const double cut = sorted[static_cast<size_t>(0.9 * (sorted.size() - 1))];
+        for (size_t i = 0; i < image.electrons.size(); ++i)
+            if (image.electrons[i] >= cut && image.electrons[i] > 0) {
+                directRel.push_back(image.directStderr[i] / image.electrons[i]);
+                pathRel.push_back(image.pathStderr[i] / image.electrons[i]);
+            }
         double signal = 0;
         for (double e : image.electrons) signal += e;
         if (!(signal > 0))
@@ -148,6 +178,13 @@ void runAcquire(const AcquireArgs& a) {
                                     {"pixel_size_um", m.pixelSizeMm() * 1e3},
                                     {"z_step_um", m.stack.stepMm * 1e3},
                                     {"spp", o.spp},
+                                    {"estimator", optics::estimatorName(o.estimator)},
+                                    {"direct_spp", o.estimator == optics::Estimator::Split ? o.directSpp : 0},
+                                    {"direct_electrons_fraction", directSum / std::max(1e-300, directSum + pathSum)},
+                                    {"direct_thread_seconds", directSeconds},
+                                    {"path_thread_seconds", pathSeconds},
+                                    {"median_direct_relative_stderr_top10", median(directRel)},
+                                    {"median_path_relative_stderr_top10", median(pathRel)},
                                     {"seed", o.seed},
                                     {"seconds", seconds},
                                     {"paths", stats.paths},
@@ -173,7 +210,11 @@ void addAcquireCommand(CLI::App& app) {
         ->required();
     cmd->add_option("--planes", a->planes, "Number of planes (default: the scene's stack)");
     cmd->add_option("--step", a->step, "Distance between planes with a unit, e.g. 2um");
-    cmd->add_option("--spp", a->spp, "Samples per pixel");
+    cmd->add_option("--spp", a->spp, "Path samples per pixel");
+    cmd->add_option("--estimator", a->estimator,
+                    "split (default: the unscattered light of the sheets by its own low-variance estimator, paths for the rest) or "
+                    "path (every sample a full path: the reference)");
+    cmd->add_option("--direct-spp", a->directSpp, "Samples per pixel of the direct part (split estimator; default 64)");
     cmd->add_option("--seed", a->seed, "Random seed (default: the scene's)");
     cmd->add_option("--threads", a->threads, "Threads (0 = all cores)");
     cmd->add_option("--channels", a->channels, "Channels to acquire, by name (default: all)")->delimiter(',');

@@ -1,5 +1,9 @@
 #include "core/sampling.h"
 
+#include <boost/math/special_functions/erf.hpp>
+
+#include <algorithm>
+#include <cmath>
 #include <numeric>
 
 namespace fluorosim {
@@ -58,6 +62,28 @@ int sampleDiscrete(std::span<const double> weights, double u, double* pmf, doubl
             return static_cast<int>(i);
         }
     return -1;
+}
+
+double sampleTruncatedNormal(double u, double mean, double sigma, double lo, double hi, double* pdf) {
+    auto uniform = [&] {
+        *pdf = 1.0 / (hi - lo);
+        return std::clamp(lo + u * (hi - lo), lo, hi);
+    };
+    if (!std::isfinite(sigma) || !(sigma > 0) || hi - lo < 0.2 * sigma) return uniform();
+    const double a = (lo - mean) / sigma, b = (hi - mean) / sigma;
+    // Work in the tail the interval lies in (upper tail Q(x) = erfc(x/√2)/2), so that far-out
+    // intervals keep their digits.
+    const bool upper = a > 0;
+    const double qa = 0.5 * std::erfc((upper ? a : -a) / std::sqrt(2.0)), qb = 0.5 * std::erfc((upper ? b : -b) / std::sqrt(2.0));
+    const double mass = upper ? qa - qb : qb - qa;
+    if (!(mass > 1e-280) || !std::isfinite(mass)) return uniform();
+    double x;
+    if (upper) x = std::sqrt(2.0) * boost::math::erfc_inv(2 * (qa - u * mass));
+    else x = -std::sqrt(2.0) * boost::math::erfc_inv(2 * (qa + u * mass));
+    const double t = std::clamp(mean + sigma * x, lo, hi);
+    const double z = (t - mean) / sigma;
+    *pdf = std::exp(-0.5 * z * z) / (std::sqrt(2 * kPi) * sigma * mass);
+    return t;
 }
 
 }  // namespace fluorosim

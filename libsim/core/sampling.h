@@ -45,4 +45,10 @@ double sampleCosUniformAzimuth(Generator& rng) {
 // Index into weights with probability proportional to weight; u is remapped to a fresh uniform.
 int sampleDiscrete(std::span<const double> weights, double u, double* pmf = nullptr, double* uRemapped = nullptr);
 
+// A point of [lo, hi] (finite, lo < hi) from the normal density of `mean` and `sigma` restricted to
+// it, by inversion (so stratified u give stratified points), and its pdf. Uniform when sigma is
+// infinite, when the interval is short against sigma, or when it lies so far in a tail that the
+// normal's mass there underflows.
+double sampleTruncatedNormal(double u, double mean, double sigma, double lo, double hi, double* pdf);
+
 }  // namespace fluorosim

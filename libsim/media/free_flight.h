@@ -49,7 +49,8 @@ S sampleTmaj(Iter iter, Rng& rng, Callback&& callback) {
     while (const auto seg = iter.next()) {
         const double sigmaHero = heroComponent(seg->sigmaMaj);
         if (!(sigmaHero > 0)) {
-            if (std::isfinite(seg->tMax)) Tmaj *= expNeg(seg->sigmaMaj * (seg->tMax - seg->tMin));
+            // Empty segments are common (a sparse grid's empty cells): skip the exponentials.
+            if (std::isfinite(seg->tMax) && bool(seg->sigmaMaj)) Tmaj *= expNeg(seg->sigmaMaj * (seg->tMax - seg->tMin));
             continue;
         }
         double tMin = seg->tMin;

@@ -41,13 +41,15 @@ Medium::Medium(std::string name, Spectrum sigmaA, Spectrum sigmaS, double g, dou
         throw ConfigError("medium \"" + name_ + "\": ior must be finite and >= 1, got " + std::to_string(ior));
     constants_[kSolventChannel] = constants_[kScatteringChannel] = 1.0;
     for (size_t i = 0; i < dyes_.size(); ++i) constants_[kFirstDyeChannel + i] = dyes_[i].molar;
-    channelMax_ = constants_;
+    channelMax_ = channelFloor_ = constants_;
     if (volume_) {
         if (volume_->channelCount() != channelCount())
             throw ConfigError("medium \"" + name_ + "\": its volume has " + std::to_string(volume_->channelCount()) +
                               " channels, expected " + std::to_string(channelCount()));
         const std::vector<double> mx = volume_->channelMaxima();
         std::copy(mx.begin(), mx.end(), channelMax_.begin());
+        const std::vector<double> floors = volume_->channelFloors();
+        std::copy(floors.begin(), floors.end(), channelFloor_.begin());
     }
     bool anything = sigmaA_.maxValue() * channelMax_[kSolventChannel] > 0 || sigmaS_.maxValue() * channelMax_[kScatteringChannel] > 0;
     for (int c = kFirstDyeChannel; c < channelCount(); ++c) anything = anything || channelMax_[c] > 0;

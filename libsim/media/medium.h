@@ -106,6 +106,9 @@ public:
     int channelCount() const { return kFirstDyeChannel + static_cast<int>(dyes_.size()); }
     // Largest value of each channel anywhere in the medium (the constants when homogeneous).
     const ChannelValues& channelMax() const { return channelMax_; }
+    // A lower bound of each channel everywhere (the constants when homogeneous): the part of the
+    // medium whose transmittance is known exactly, so that only the rest needs ratio tracking.
+    const ChannelValues& channelFloor() const { return channelFloor_; }
 
     MediumSpectra spectra(const SampledWavelengths& wl) const;
     void channelValues(const Vec3& p, double* out) const {
@@ -134,7 +137,7 @@ private:
     std::vector<DyeComponent> dyes_;
     std::vector<double> molar_;
     std::shared_ptr<const VolumeFields> volume_;
-    ChannelValues constants_{}, channelMax_{};
+    ChannelValues constants_{}, channelMax_{}, channelFloor_{};
     HenyeyGreenstein phase_;
     double ior_;
     bool vacuum_;

@@ -192,4 +192,12 @@ double FluorescencePlan::kernel(int medium, const double* channels, double lambd
     return sum * lambdaExcitation / lambda;
 }
 
+std::array<double, kMaxMediumChannels> FluorescencePlan::kernelPerMolar(int medium, double lambdaExcitation, double lambda) const {
+    std::array<double, kMaxMediumChannels> perChannel{};
+    for (const DyeTerm& t : media_[static_cast<size_t>(medium)].dyes)
+        perChannel[static_cast<size_t>(t.channel)] +=
+            t.dye->quantumYield() * t.dye->emissionPdf(lambda) * dyeAbsorption(*t.dye, lambdaExcitation, 1.0) * lambdaExcitation / lambda;
+    return perChannel;
+}
+
 }  // namespace fluorosim

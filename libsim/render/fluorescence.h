@@ -47,6 +47,8 @@ public:
     // Σ_i Φ_i f_i(λ) σa,i(λx; c_i) λx/λ. The factor λx/λ
     // turns photons counted by Φ into energy.
     double kernel(int medium, const double* channels, double lambdaExcitation, double lambda) const;
+    // The same per mol/L of each channel (linear in the concentrations): kernel = Σ_c channels[c] this[c].
+    std::array<double, kMaxMediumChannels> kernelPerMolar(int medium, double lambdaExcitation, double lambda) const;
 
     // Excitation wavelengths of a sub-path: the lights' lines that some dye absorbs, plus a continuous
     // part over the dyes' absorption bands when a light is continuous or when one dye's emission can

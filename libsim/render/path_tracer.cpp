@@ -26,10 +26,12 @@ SampledSpectrum clampZero(const SampledSpectrum& s) {
 }  // namespace
 
 PathTracer::PathTracer(const Scene& scene)
-    : scene_(scene), lightList_(scene.lights), lights_(scene, lightList_), fluorescence_(scene, lightList_) {}
+    : scene_(scene), lightList_(scene.lights), lights_(scene, lightList_),
+      fluorescence_(scene, lightList_) {}
 
 PathTracer::PathTracer(const Scene& scene, std::vector<Light> lights)
-    : scene_(scene), lightList_(std::move(lights)), lights_(scene, lightList_), fluorescence_(scene, lightList_) {
+    : scene_(scene), lightList_(std::move(lights)), lights_(scene, lightList_),
+      fluorescence_(scene, lightList_) {
     const auto isArea = [](const Light& l) { return std::holds_alternative<AreaLight>(l); };
     if (std::any_of(scene.lights.begin(), scene.lights.end(), isArea) || std::any_of(lightList_.begin(), lightList_.end(), isArea))
         throw ConfigError("a separate light list cannot be used with emitting shapes (their lights are indexed by shape)");
@@ -42,12 +44,20 @@ int PathTracer::mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const
 
 SampledSpectrum PathTracer::transmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl, Rng& rng,
                                          const Vec3* surfaceNormal, double surfaceEpsilon) const {
-    return estimateTransmittance(p0, p1, medium, wl, rng, surfaceNormal, surfaceEpsilon).T;
+    return estimateTransmittance(p0, p1, medium, wl, rng, surfaceNormal, surfaceEpsilon, false, true).T;
+}
+
+SampledSpectrum PathTracer::beamTransmittance(const Vec3& p, const Vec3& towardSource, int medium, const SampledWavelengths& wl,
+                                             Rng& rng) const {
+    // As next-event estimation connects to a beam (LightSampler): back along the beam beyond the scene,
+    // ending where it entered the sample.
+    const Vec3 far = p + towardSource * (2 * (scene_.geometry.extent() + length(p)) + 1);
+    return estimateTransmittance(p, far, medium, wl, rng, nullptr, 0.0, true, true).T;
 }
 
 PathTracer::TransmittanceEstimate PathTracer::estimateTransmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl,
                                                                     Rng& rng, const Vec3* surfaceNormal, double surfaceEpsilon,
-                                                                    bool untilRefraction) const {
+                                                                    bool untilRefraction, bool residual) const {
     TransmittanceEstimate e{SampledSpectrum(1.0), SampledSpectrum(1.0), SampledSpectrum(1.0)};
     // Rays start exactly on surfaces and skip self-intersections with tMin, so every segment lies on
     // the line from p0 to p1 and its length is exact.
@@ -78,7 +88,7 @@ PathTracer::TransmittanceEstimate PathTracer::estimateTransmittance(const Vec3& 
                 e.T *= T;
                 e.r_u *= T / T[0];
                 e.r_l *= T / T[0];
-            } else if (!ratioTrack(med, spec, r, segment, rng, e)) {
+            } else if (!ratioTrack(med, spec, r, segment, rng, e, residual)) {
                 return {SampledSpectrum(0.0), e.r_u, e.r_l};
             }
         }
@@ -96,19 +106,40 @@ PathTracer::TransmittanceEstimate PathTracer::estimateTransmittance(const Vec3& 
     return {SampledSpectrum(0.0), e.r_u, e.r_l};
 }
 
-bool PathTracer::ratioTrack(const Medium& med, const MediumSpectra& spec, const Ray& r, double length, Rng& rng,
-                            TransmittanceEstimate& e) const {
+bool PathTracer::ratioTrack(const Medium& med, const MediumSpectra& spec, const Ray& r, double length, Rng& rng, TransmittanceEstimate& e,
+                            bool residual) const {
     // Ratio tracking (pbrt-v4's TraceTransmittance) with the hero wavelength's majorant; r_u and r_l
     // carry the path pdf ratios that spectral MIS needs, with roulette once the estimate is small.
-    auto majorants = med.majorants(r, 0.0, length, [&](const double* m) {
-        const MediumSample s = spec.at(m);
+    // Residual tracking (Novák et al. 2014) takes the channels' floors (the constant tissue, the
+    // solvent) out exactly and tracks only what varies: where the floor is most of the extinction, a
+    // collision no longer zeroes the estimate. Its collisions are not those of a camera path's delta
+    // tracking, so MIS against hitting an area light needs plain tracking; delta lights take residual.
+    // The residual's majorant is raised kResidualMajorantScale times: ratio tracking's relative variance
+    // falls as σ²L/σ̄, and the residual (a sparse dye) is so thin that the extra lookups cost little.
+    constexpr double kResidualMajorantScale = 8;
+    ChannelValues floor{};
+    if (residual) {
+        floor = med.channelFloor();
+        const MediumSample c = spec.at(floor.data());
+        const SampledSpectrum Tc = expNeg((c.sigmaA + c.sigmaS) * length);
+        if (!(Tc[0] > 0)) return false;
+        e.T *= Tc;
+        e.r_u *= Tc / Tc[0];
+        e.r_l *= Tc / Tc[0];
+    }
+    auto above = [&](const double* values) {
+        ChannelValues v;
+        for (int c = 0; c < spec.channels; ++c) v[c] = std::max(0.0, values[c] - floor[c]);
+        const MediumSample s = spec.at(v.data());
         return s.sigmaA + s.sigmaS;
+    };
+    auto majorants = med.majorants(r, 0.0, length, [&](const double* values) {
+        return residual ? above(values) * kResidualMajorantScale : above(values);
     });
     const SampledSpectrum T_maj = sampleTmaj<SampledSpectrum>(majorants, rng, [&](double t, const SampledSpectrum& sigmaMaj, const SampledSpectrum& Tm) {
         ChannelValues ch;
         med.channelValues(r.at(t), ch.data());
-        const MediumSample mp = spec.at(ch.data());
-        const SampledSpectrum sigmaN = clampZero(sigmaMaj - mp.sigmaA - mp.sigmaS);
+        const SampledSpectrum sigmaN = clampZero(sigmaMaj - above(ch.data()));
         const double pdf = Tm[0] * sigmaMaj[0];
         e.T *= Tm * sigmaN / pdf;
         e.r_l *= Tm * sigmaMaj / pdf;
@@ -140,6 +171,10 @@ struct PathTracer::PathState {
     Vec3 prevScatter;
     int generation = 0;             // fluorescence events before this path
     bool startsAtEmission = false;  // ray.o is a re-emission point with an isotropic direction still to choose
+    // Beam cores estimated separately (PathStart::directBeamsSeparate): on a camera path's first
+    // straight segment, and at the first vertex of a sub-path branched from it.
+    bool directCameraSegment = false;
+    bool skipBeamCoresAtStart = false;
     double tMin = 0;                // > 0 when ray.o lies on the surface the ray leaves
 };
 
@@ -151,6 +186,7 @@ PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths&
     state.medium = medium;
     state.beta = start.beta;
     state.r_u = start.r_u;
+    state.directCameraSegment = start.directBeamsSeparate;
     state.prevScatter = ray.o;
     return trace(state, wl, rng, stats);
 }
@@ -161,7 +197,7 @@ PathRadiance PathTracer::meanRadiance(const Vec3& p, int medium, const SampledWa
 }
 
 PathRadiance PathTracer::traceFromEmission(const Vec3& p, int medium, const SampledWavelengths& wl, const SampledSpectrum& beta, int depth,
-                                           int generation, Rng& rng, PathStats& stats) const {
+                                           int generation, Rng& rng, PathStats& stats, bool skipBeamCores) const {
     PathState state;
     state.ray = Ray{p, Vec3(0, 0, 1)};
     state.medium = medium;
@@ -170,11 +206,13 @@ PathRadiance PathTracer::traceFromEmission(const Vec3& p, int medium, const Samp
     state.depth = depth;
     state.generation = generation;
     state.startsAtEmission = true;
+    state.skipBeamCoresAtStart = skipBeamCores;
     return trace(state, wl, rng, stats);
 }
 
 SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double* channels, const SampledWavelengths& wl,
-                                         const SampledSpectrum& weight, Rng& rng, PathStats& stats, int generation, int depth) const {
+                                         const SampledSpectrum& weight, Rng& rng, PathStats& stats, int generation, int depth,
+                                         bool skipBeamCores) const {
     // Generations are ended by roulette; this cap only guards the stack and is reported if reached.
     constexpr int kMaxGenerations = 64;
     if (generation >= kMaxGenerations) {
@@ -211,10 +249,11 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double
     SampledSpectrum Lx(0.0);
     if (fluorescence_.model() == FluorescenceModel::Paper) {
         const double uLight = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform();
-        if (const auto ls = lights_.sample(p, uLight, u1, u2, wlx); ls && ls->L && ls->pdf > 0)
-            Lx = start * estimateTransmittance(p, ls->p, medium, wlx, rng, nullptr, 0.0, ls->beam).T * ls->L * (kInv4Pi / ls->pdf);
+        if (const auto ls = lights_.sample(p, uLight, u1, u2, wlx);
+            ls && ls->L && ls->pdf > 0 && !(skipBeamCores && ls->beam && wlx.discrete && ls->beamProfile->inCore(p, ls->side, wlx.lambda[0])))
+            Lx = start * estimateTransmittance(p, ls->p, medium, wlx, rng, nullptr, 0.0, ls->beam, true).T * ls->L * (kInv4Pi / ls->pdf);
     } else {
-        Lx = traceFromEmission(p, medium, wlx, start, depth, generation + 1, rng, stats).total();
+        Lx = traceFromEmission(p, medium, wlx, start, depth, generation + 1, rng, stats, skipBeamCores).total();
     }
     SampledSpectrum result(0.0);
     for (int k = 0; k < kNumWavelengths; ++k) {
@@ -253,16 +292,18 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
     // NEE from a scattering vertex. evalScatter(wi) returns {f * |cos| (or phase value), pdf}.
     // At a surface, `surface` and `n` let the light ray leave through the side of wi (transmission).
     auto directLight = [&](const Vec3& p, int lightMedium, const SampledSpectrum& r_p, auto&& evalScatter,
-                           const Vec3& nOffset, const ShapeInfo* surface, double surfaceEps) -> SampledSpectrum {
+                           const Vec3& nOffset, const ShapeInfo* surface, double surfaceEps, bool skipBeamCores) -> SampledSpectrum {
         const double uLight = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform();
         const auto ls = lights_.sample(p, uLight, u1, u2, wl);
         if (!ls || !ls->L || !(ls->pdf > 0)) return SampledSpectrum(0.0);
+        // The direct estimator covers the beams' lines in their cores (not a continuous beam spectrum).
+        if (skipBeamCores && ls->beam && wl.discrete && ls->beamProfile->inCore(p, ls->side, wl.lambda[0])) return SampledSpectrum(0.0);
         const auto [fHat, scatterPdf] = evalScatter(ls->wi);
         if (!fHat) return SampledSpectrum(0.0);
         int startMedium = lightMedium;
         if (surface) startMedium = mediumAfterCrossing(*surface, nOffset, ls->wi, lightMedium);
         const TransmittanceEstimate T =
-            estimateTransmittance(p, ls->p, startMedium, wl, rng, surface ? &nOffset : nullptr, surfaceEps, ls->beam);
+            estimateTransmittance(p, ls->p, startMedium, wl, rng, surface ? &nOffset : nullptr, surfaceEps, ls->beam, ls->delta);
         if (!T.T) return SampledSpectrum(0.0);
         const SampledSpectrum rl = T.r_l * r_p * ls->pdf;
         if (ls->delta) return beta * fHat * T.T * ls->L / rl.average();
@@ -272,7 +313,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
 
     // A real scattering vertex in a medium: NEE with MIS, then a new direction from the phase function
     // (sampled exactly, so f / pdf = 1 and beta is unchanged).
-    auto scatterInMedium = [&](const Vec3& p, const HenyeyGreenstein& phase) {
+    auto scatterInMedium = [&](const Vec3& p, const HenyeyGreenstein& phase, bool skipBeamCores) {
         const Vec3 dirIn = ray.d;
         L += directLight(
             p, medium, r_u,
@@ -280,7 +321,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                 const double v = phase.pdf(dirIn, wi);
                 return std::pair{SampledSpectrum(v), v};
             },
-            Vec3(), nullptr, 0.0);
+            Vec3(), nullptr, 0.0, skipBeamCores);
         double phasePdf = 0;
         const Vec3 wi = phase.sample(dirIn, rng.uniform(), rng.uniform(), &phasePdf);
         r_l = r_u / phasePdf;
@@ -291,7 +332,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
 
     if (st.startsAtEmission) {
         static const HenyeyGreenstein isotropic(0.0);
-        scatterInMedium(ray.o, isotropic);
+        scatterInMedium(ray.o, isotropic, st.skipBeamCoresAtStart);
     }
 
     while (true) {
@@ -348,7 +389,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                             const SampledSpectrum r_e = r_u * sigmaB * Tm / pdf;
                             if (r_e)
                                 Lf += fluorescence(ray.at(t), medium, ch.data(), wl, beta * Tm / (pdf * r_e.average()), rng, stats,
-                                                   st.generation, depth);
+                                                   st.generation, depth, st.directCameraSegment);
                         }
                         const SampledSpectrum ratio = Tm * sigmaBBar / (Tm[0] * sigmaBBar[0]);
                         beta *= ratio;
@@ -377,8 +418,10 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                             terminated = true;
                             return false;
                         }
+                        const bool skipCores = st.directCameraSegment;
+                        st.directCameraSegment = false;
                         if (beta && r_u) {
-                            scatterInMedium(ray.at(t), med.phase());
+                            scatterInMedium(ray.at(t), med.phase(), skipCores);
                             scattered = true;
                         }
                         return false;
@@ -428,6 +471,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             break;
         }
         ++stats.surfaceBounces;
+        st.directCameraSegment = false;
         const Material& mat = *scene_.materials[static_cast<size_t>(shape.material)];
         // Opaque surfaces are two-sided; interfaces keep their outward orientation.
         const Vec3 n = shape.isInterface ? hit->n : faceForward(hit->n, -ray.d);
@@ -444,7 +488,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                     const SampledSpectrum f = mat.f(wo, wiLocal, wl, eta, TransportMode::Radiance) * std::abs(wiLocal.z);
                     return std::pair{f, mat.pdf(wo, wiLocal, eta)};
                 },
-                n, &shape, hit->epsilon);
+                n, &shape, hit->epsilon, false);
         }
 
         const auto bs = mat.sample(wo, rng.uniform(), rng.uniform(), rng.uniform(), wl, eta, TransportMode::Radiance);

@@ -51,6 +51,9 @@ struct PathRadiance {
 // into Li). A product of two separately normalized one-sample MIS weights would be biased.
 struct PathStart {
     SampledSpectrum beta{1.0}, r_u{1.0};
+    // The unscattered light of the beams' cores along the camera ray's first straight segment is
+    // estimated separately (render/direct_beam.h): leave it out here, so the two add up to the model.
+    bool directBeamsSeparate = false;
 };
 
 class PathTracer {
@@ -74,6 +77,9 @@ public:
     SampledSpectrum transmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl, Rng& rng,
                                   const Vec3* surfaceNormal = nullptr, double surfaceEpsilon = 0.0) const;
 
+    // Transmittance from p back along a beam (unit `towardSource`) to where it entered the sample.
+    SampledSpectrum beamTransmittance(const Vec3& p, const Vec3& towardSource, int medium, const SampledWavelengths& wl, Rng& rng) const;
+
     const FluorescencePlan& fluorescence() const { return fluorescence_; }
     const std::vector<Light>& lights() const { return lightList_; }
 
@@ -84,19 +90,24 @@ private:
         SampledSpectrum T, r_u, r_l;
     };
     // With `untilRefraction`, the segment ends at the first smooth dielectric it meets (where a beam
-    // entered the sample) instead of being blocked by it.
+    // entered the sample) instead of being blocked by it. `residual` tracks only what varies above the
+    // media's floors (for delta lights and plain transmittance; see ratioTrack).
     TransmittanceEstimate estimateTransmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl, Rng& rng,
-                                                const Vec3* surfaceNormal, double surfaceEpsilon, bool untilRefraction = false) const;
+                                                const Vec3* surfaceNormal, double surfaceEpsilon, bool untilRefraction,
+                                                bool residual) const;
     // Ratio tracking over [0, length) of r in a grid medium; false once the estimate is zero.
-    bool ratioTrack(const Medium& med, const MediumSpectra& spec, const Ray& r, double length, Rng& rng, TransmittanceEstimate& e) const;
+    bool ratioTrack(const Medium& med, const MediumSpectra& spec, const Ray& r, double length, Rng& rng, TransmittanceEstimate& e,
+                    bool residual) const;
     PathRadiance trace(PathState& state, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;
     // A path that starts at p in an isotropic direction (a re-emission point) with throughput beta.
+    // With `skipBeamCores`, its first vertex leaves out beams whose core holds p (PathStart).
     PathRadiance traceFromEmission(const Vec3& p, int medium, const SampledWavelengths& wl, const SampledSpectrum& beta, int depth,
-                                   int generation, Rng& rng, PathStats& stats) const;
+                                   int generation, Rng& rng, PathStats& stats, bool skipBeamCores = false) const;
     // Radiance re-emitted at p towards the path, at the camera wavelengths, for a branch whose
     // source-term estimate is multiplied by `weight` (throughput over branch pdf, MIS-normalized).
     SampledSpectrum fluorescence(const Vec3& p, int medium, const double* channels, const SampledWavelengths& wl,
-                                 const SampledSpectrum& weight, Rng& rng, PathStats& stats, int generation, int depth) const;
+                                 const SampledSpectrum& weight, Rng& rng, PathStats& stats, int generation, int depth,
+                                 bool skipBeamCores) const;
     int mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const Vec3& dir, int current) const;
 
     const Scene& scene_;
@@ -106,3 +117,4 @@ private:
 };
 
 }  // namespace fluorosim
+

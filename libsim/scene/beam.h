@@ -4,6 +4,8 @@
 // enters the scene, with the unattenuated irradiance profile at p times the transmittance of that
 // segment. The Gaussian light sheet implements this in optics/ (libsim never includes optics).
 // Profiles are immutable: a z-stack moves a sheet by wrapping it (optics::Microscope::lightsAt).
+#include <array>
+#include <limits>
 #include <memory>
 #include <optional>
 
@@ -11,6 +13,18 @@
 #include "spectral/spectrum.h"
 
 namespace fluorosim {
+
+// A piece [tMin, tMax] of a ray inside a beam's core, with a proposal for placing points along it:
+// a normal density of t (mean `centre`, deviation `sigma`) that follows the profile across the beam,
+// or uniform when sigma is infinite.
+struct BeamCoreInterval {
+    double tMin = 0, tMax = 0;
+    double centre = 0, sigma = std::numeric_limits<double>::infinity();
+};
+struct BeamCore {
+    int count = 0;
+    std::array<BeamCoreInterval, 2> intervals{};
+};
 
 class BeamProfile {
 public:
@@ -20,7 +34,18 @@ public:
     // Irradiance (W/mm²) of the unattenuated beam of `side` at p, per unit of normalised spectral weight.
     virtual double irradiance(const Vec3& p, int side, double lambdaNm) const = 0;
     virtual const Spectrum& spectrum() const = 0;     // normalised to total weight 1
+
+    // The core: where a direct estimator (the microscope's) integrates the unscattered beam along
+    // camera rays, so that paths leave it out (docs/model.md, "Split estimator"). inCore(p) holds
+    // exactly for the points of coreAlong's intervals (up to rounding at the edge, where a sheet is
+    // e^-32 of its peak); outside the core paths keep the beam. Default: no core.
+    virtual bool inCore(const Vec3& /*p*/, int /*side*/, double /*lambdaNm*/) const { return false; }
+    virtual BeamCore coreAlong(const Ray& /*ray*/, int /*side*/, double /*lambdaNm*/) const { return {}; }
 };
+
+// Solutions t of a t² + b t + c <= 0 (a quadric region crossed by a ray), as at most two intervals,
+// unbounded ends at ±infinity. Shared by the beam cores.
+BeamCore quadraticCore(double a, double b, double c);
 
 // What a scene file says about a light sheet (or, with `widefield`, an epi-illumination field: a
 // uniform beam along `propagation` over a disc of `fieldDiameterMm` around `centreMm`), in internal

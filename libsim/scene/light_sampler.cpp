@@ -78,6 +78,8 @@ std::optional<LightSample> LightSampler::sample(const Vec3& ref, double uLight, 
         ls.pdf = selectPdf / sides;
         ls.delta = true;
         ls.beam = true;
+        ls.beamProfile = beam->profile.get();
+        ls.side = side;
         return ls;
     }
     const auto& al = std::get<AreaLight>(light);

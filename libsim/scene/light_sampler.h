@@ -18,6 +18,8 @@ struct LightSample {
     // A beam (light sheet): its profile holds inside the sample, so the shadow ray ends where the beam
     // entered it, at the first refracting interface, instead of at `p`.
     bool beam = false;
+    const BeamProfile* beamProfile = nullptr;  // the beam and side sampled, when `beam`
+    int side = 0;
     uint32_t shape = 0;
 };
 

@@ -131,6 +131,12 @@ std::vector<double> VolumeFields::channelMaxima() const {
     return m;
 }
 
+std::vector<double> VolumeFields::channelFloors() const {
+    std::vector<double> f;
+    for (const VolumeChannel& c : channels_) f.push_back(c.offset);
+    return f;
+}
+
 size_t VolumeFields::memoryBytes() const {
     size_t bytes = cellMax_.size() * sizeof(double);
     for (const VolumeChannel& c : channels_)

@@ -47,6 +47,8 @@ public:
     std::array<int, 3> cellCounts() const { return cells_; }
     // Each channel's largest value anywhere (over the cells and outside the grid).
     std::vector<double> channelMaxima() const;
+    // A lower bound of each channel's value everywhere (its offset: grid values are never negative).
+    std::vector<double> channelFloors() const;
     size_t memoryBytes() const;  // grids and majorant cells
 
     // The DDA. Segments cover [tMin, tMax) in order, with cells of the grid and, outside its domain,
