@@ -14,6 +14,8 @@
 #include <string>
 #include <vector>
 
+#include "support/temp_dir.h"
+
 namespace fluorosim::testing {
 
 namespace fs = std::filesystem;
@@ -37,30 +39,6 @@ struct RunResult {
     int exitCode = -1;  // 128+N when killed by signal N (as the shell reports it)
     std::string out, err;
     double seconds = 0;
-};
-
-// A per-test temporary folder, removed at the end of the test.
-class TempDir {
-public:
-    TempDir() {
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        path_ = fs::temp_directory_path() / ("fluorosim_cli_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
-        fs::remove_all(path_);
-        fs::create_directories(path_);
-    }
-    ~TempDir() {
-        std::error_code ec;
-        fs::remove_all(path_, ec);
-    }
-    const fs::path& path() const { return path_; }
-    fs::path write(const std::string& name, const std::string& text) const {
-        const fs::path p = path_ / name;
-        std::ofstream(p) << text;
-        return p;
-    }
-
-private:
-    fs::path path_;
 };
 
 // Runs the CLI with `args`, stdin from /dev/null, stdout and stderr captured to files in `dir`.

@@ -332,7 +332,9 @@ TEST(Cli, FluorescentSceneWritesElasticAndFluorescentLayers) {
             EXPECT_NEAR(total[i], el[i] + fl[i], 1e-5 * (1 + std::abs(total[i])));
             fluorescentSum += fl[i];
         }
-        if (std::string(c) == "G") EXPECT_GT(fluorescentSum, 0.0);  // AF488 emits green
+        if (std::string(c) == "G") {
+            EXPECT_GT(fluorescentSum, 0.0);  // AF488 emits green
+        }
     }
     EXPECT_TRUE(e.channels.count("fluorescent.S0.525,000000nm"));
     EXPECT_TRUE(e.channels.count("elastic.S0.485,000000nm"));

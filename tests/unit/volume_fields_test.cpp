@@ -10,18 +10,13 @@
 
 #include "core/errors.h"
 #include "core/rng.h"
+#include "support/temp_dir.h"
 #include "volume/volume_fields.h"
 
 namespace fluorosim {
 namespace {
 
 namespace fs = std::filesystem;
-
-fs::path tempFile(const std::string& name) {
-    const fs::path dir = fs::temp_directory_path() / "fluorosim_volume_test";
-    fs::create_directories(dir);
-    return dir / name;
-}
 
 Affine voxels(double size, const Vec3& origin = Vec3()) { return Affine::scaling(size).then(Affine::translation(origin)); }
 
@@ -133,7 +128,8 @@ std::string readError(const fs::path& file, const std::string& grid, bool labels
 }
 
 TEST(DensityGrid, BadVoxelsAreRejectedWithGridNameAndCoordinate) {
-    const fs::path file = tempFile("bad_voxels.vdb");
+    const testing::TempDir dir;
+    const fs::path file = dir.file("bad_voxels.vdb");
     auto bad = [](double v) {
         return [v](int i, int j, int k) { return (i == 3 && j == 4 && k == 5) ? v : 1.0; };
     };
@@ -161,6 +157,8 @@ TEST(DensityGrid, BadVoxelsAreRejectedWithGridNameAndCoordinate) {
 }
 
 TEST(DensityGrid, MissingEmptyAndForeignFilesGiveClearErrors) {
+    const testing::TempDir dir;
+    const auto tempFile = [&](const std::string& name) { return dir.file(name); };
     EXPECT_THROW((void)DensityGrid::read(tempFile("does_not_exist.vdb").string(), "x"), IoError);
     EXPECT_NE(readError(tempFile("does_not_exist.vdb"), "x").find("no such file"), std::string::npos);
     const fs::path empty = tempFile("empty.vdb");

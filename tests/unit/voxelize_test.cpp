@@ -333,8 +333,10 @@ TEST(Voxelize, CoveredVolumeIsTheUnionOfThePieces) {
 
 // ---- output file, grids, labels ----
 
+// One folder per test process, removed at exit.
 std::string tempPath(const std::string& name) {
-    return (fs::temp_directory_path() / ("fluorosim_vox_" + std::to_string(::getpid()) + "_" + name)).string();
+    static const testing::TempDir dir;
+    return dir.file(name).string();
 }
 
 const VdbGridStats& gridNamed(const std::vector<VdbGridStats>& grids, const std::string& name) {
