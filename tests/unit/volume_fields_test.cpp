@@ -185,5 +185,38 @@ TEST(VolumeFields, GridsOfOneMediumMustShareTheirVoxels) {
     }
 }
 
+TEST(DensityGrid, CorruptLengthsAreRefusedBeforeOpenVdbAllocatesThem) {
+    // A grid type name claiming 2 GB used to make OpenVDB allocate and fill it (gigabytes, a minute)
+    // before failing; the file's structure is now checked against its size first.
+    const testing::TempDir dir;
+    const fs::path file = dir.file("grid.vdb");
+    writeVoxelGrids(file.string(), voxels(1), {{"density", {{0, 0, 0}, {7, 7, 7}}, [](int, int, int) { return 1.0; }}});
+    std::string bytes;
+    {
+        std::ifstream in(file, std::ios::binary);
+        bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    }
+    const auto at = bytes.find("Tree_float_5_4_3");
+    ASSERT_NE(at, std::string::npos);
+    bytes.replace(at - 4, 4, std::string("\xff\xff\xff\x7f", 4));
+    std::ofstream(file, std::ios::binary | std::ios::trunc) << bytes;
+    EXPECT_THROW(checkVdbStructure(file.string()), IoError);
+    const std::string e = readError(file, "density");
+    EXPECT_NE(e.find("corrupt OpenVDB file"), std::string::npos) << e;
+    EXPECT_NE(e.find("grid type name of 2147483647 bytes"), std::string::npos) << e;
+    EXPECT_NE(e.find(file.string()), std::string::npos) << e;
+}
+
+TEST(DensityGrid, ValidFilesPassTheStructureCheck) {
+    const testing::TempDir dir;
+    const fs::path file = dir.file("two.vdb");
+    writeVoxelGrids(file.string(), voxels(0.5),
+                    {{"a", {{0, 0, 0}, {9, 9, 9}}, [](int, int, int) { return 2.0; }, {"uM", "mm"}},
+                     {"b", {{-4, 0, 0}, {3, 3, 3}}, [](int, int, int) { return 1.0; }, {}, true}});
+    EXPECT_NO_THROW(checkVdbStructure(file.string()));
+    EXPECT_NO_THROW((void)DensityGrid::read(file.string(), "a"));
+    EXPECT_NO_THROW((void)DensityGrid::read(file.string(), "b", true));
+}
+
 }  // namespace
 }  // namespace fluorosim
