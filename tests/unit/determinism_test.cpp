@@ -73,7 +73,7 @@ TEST(Cancellation, KeepsFinishedPasses) {
     opt.spp = 8;
     opt.sppPerPass = 2;
     opt.cancel = &cancel;
-    opt.passFinished = [&](const Film&, int done) {
+    opt.passFinished = [&](const Film&, int done, const PathStats&) {
         if (done == 4) cancel = true;
     };
     const RenderSummary s = render(scene, film, opt);
