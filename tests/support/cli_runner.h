@@ -2,6 +2,7 @@
 // Runs the fluorosim CLI from tests: a per-test temporary folder, captured stdout and stderr, exit
 // codes, and a check that an error is one clear line.
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -39,6 +40,9 @@ struct RunResult {
     int exitCode = -1;  // 128+N when killed by signal N (as the shell reports it)
     std::string out, err;
     double seconds = 0;
+    // Peak resident memory of the largest child this test process has waited for so far (the kernel
+    // keeps only that maximum), in KiB: with one command per test, that command's peak.
+    long maxRssKb = 0;
 };
 
 // Runs the CLI with `args`, stdin from /dev/null, stdout and stderr captured to files in `dir`.
@@ -55,6 +59,8 @@ inline RunResult runCli(const TempDir& dir, const std::vector<std::string>& args
     r.exitCode = status == -1 ? -1 : WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
     r.out = readFile(outFile);
     r.err = readFile(errFile);
+    rusage usage{};
+    if (::getrusage(RUSAGE_CHILDREN, &usage) == 0) r.maxRssKb = usage.ru_maxrss;
     return r;
 }
 
