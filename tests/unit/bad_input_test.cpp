@@ -23,6 +23,12 @@ namespace fs = std::filesystem;
 using json = nlohmann::json;
 using testing::TempDir;
 
+#if defined(__SANITIZE_ADDRESS__)
+// ASan's shadow memory and quarantine inflate the resident size; the check runs in normal builds.
+constexpr bool kMeasureMemory = false;
+#else
+constexpr bool kMeasureMemory = true;
+#endif
 constexpr const char* kCap = "512MiB";
 constexpr long kCapKb = 512 * 1024;
 // What the process holds besides what the cap governs: code, libraries, the spectral database.
@@ -472,7 +478,7 @@ TEST_P(BadInput, OneLineErrorNamingFieldAndValue) {
         parts.push_back(m);
     }
     testing::expectOneLineError(r, parts);
-    EXPECT_LT(r.maxRssKb, kCapKb + kBaselineKb) << "peak memory beyond the cap";
+    if (kMeasureMemory) EXPECT_LT(r.maxRssKb, kCapKb + kBaselineKb) << "peak memory beyond the cap";
     EXPECT_TRUE(r.out.empty()) << excerptForLog(r.out);
 }
 
