@@ -16,6 +16,7 @@
 #include "output_checks.h"
 #include "core/errors.h"
 #include "core/message.h"
+#include "core/parallel.h"
 #include "core/units.h"
 #include "database.h"
 #include "progress.h"
@@ -49,6 +50,7 @@ std::string numberText(double v) {
 }
 
 DyedBall parseBall(const BallArgs& a, const spectra::Database& db) {
+    checkThreadCount(a.threads, "--threads");
     const Fluorophore dye = db.fluorophore(a.dye);
     const double c = parseQuantity(a.concentration, Dimension::MolarConcentration, "--concentration");
     if (!(c >= 0) || c > 10) throw ConfigError("--concentration: must lie in [0, 10 M], got \"" + excerpt(a.concentration) + "\"");

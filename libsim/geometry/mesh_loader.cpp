@@ -22,6 +22,7 @@ TriangleMesh loadMesh(const std::string& file) {
     std::error_code ec;
     if (!fs::exists(file, ec)) throw IoError(file + ": mesh file not found");
     if (fs::is_directory(file, ec)) throw IoError(file + ": is a folder, expected a mesh file (OBJ, PLY, ...)");
+    if (!fs::is_regular_file(file, ec)) throw IoError(file + ": not a regular file, expected a mesh file (OBJ, PLY, ...)");
     const auto size = fs::file_size(file, ec);
     if (!ec) requireMemory(kImportBytesPerFileByte * static_cast<double>(size), file + ": importing a mesh file of " +
                                                                                   formatBytes(static_cast<double>(size)));

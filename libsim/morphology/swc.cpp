@@ -161,6 +161,8 @@ Morphology readSwc(const std::string& path) {
     namespace fs = std::filesystem;
     std::error_code ec;
     if (fs::is_directory(path, ec)) throw IoError(path + ": is a folder, expected an SWC file");
+    // A device or pipe (/dev/zero) has no size to check and may never end.
+    if (fs::exists(path, ec) && !fs::is_regular_file(path, ec)) throw IoError(path + ": not a regular file, expected an SWC file");
     std::ifstream in(path, std::ios::binary);
     if (!in) throw IoError(path + ": cannot open SWC file (" + std::strerror(errno) + ")");
     // The text, the samples (56 bytes for a line of at least 14) and the tree check's index.

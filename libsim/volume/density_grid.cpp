@@ -208,6 +208,7 @@ DensityGrid DensityGrid::read(const std::string& file, const std::string& gridNa
     std::error_code ec;
     if (!std::filesystem::exists(file, ec)) throw IoError(file + ": no such file");
     if (std::filesystem::is_directory(file, ec)) throw IoError(file + ": is a folder, expected an OpenVDB file");
+    if (!std::filesystem::is_regular_file(file, ec)) throw IoError(file + ": not a regular file, expected an OpenVDB file");
     checkVdbStructure(file);
     auto impl = std::make_shared<Impl>();
     impl->name = gridName;
