@@ -96,6 +96,9 @@ std::string suggestion(const std::string& name, const std::vector<std::string>& 
 std::ifstream openSpectrumFile(const fs::path& file) {
     std::error_code ec;
     if (fs::is_directory(file, ec)) throw IoError(file.string() + ": is a folder, expected a CSV spectrum file");
+    // A device or pipe (/dev/zero) has no size to check and may never end.
+    if (fs::exists(file, ec) && !fs::is_regular_file(file, ec))
+        throw IoError(file.string() + ": not a regular file, expected a CSV spectrum file");
     std::ifstream in(file, std::ios::binary);
     if (!in) throw IoError(file.string() + ": cannot open spectrum file (" + std::strerror(errno) + ")");
     const auto size = fs::file_size(file, ec);
@@ -118,12 +121,16 @@ std::vector<std::string> closestNames(const std::string& name, const std::vector
 
 std::vector<TabulatedSpectrum> readSpectraCsv(const fs::path& file, const std::vector<std::string>& columns) {
     std::ifstream in = openSpectrumFile(file);
+    return parseSpectraCsv(in, file.string(), columns);
+}
+
+std::vector<TabulatedSpectrum> parseSpectraCsv(std::istream& in, const std::string& file, const std::vector<std::string>& columns) {
     std::string line;
-    if (!std::getline(in, line)) throw ConfigError(file.string() + ": empty file, expected a header line");
+    if (!std::getline(in, line)) throw ConfigError(file + ": empty file, expected a header line");
     const auto header = splitCsv(line);
     auto columnIndex = [&](const std::string& name) {
         const auto it = std::find(header.begin(), header.end(), name);
-        if (it == header.end()) throw ConfigError(file.string() + ": missing column \"" + name + "\" in header \"" + excerpt(trim(line)) + "\"");
+        if (it == header.end()) throw ConfigError(file + ": missing column \"" + name + "\" in header \"" + excerpt(trim(line)) + "\"");
         return static_cast<size_t>(it - header.begin());
     };
     const size_t lambdaCol = columnIndex("wavelength_nm");
@@ -132,19 +139,19 @@ std::vector<TabulatedSpectrum> readSpectraCsv(const fs::path& file, const std::v
     std::vector<double> lambda;
     std::vector<std::vector<double>> values(columns.size());
     size_t row = 1;
-    auto where = [&](const std::string& col) { return file.string() + ":" + std::to_string(row) + ": column \"" + col + "\""; };
+    auto where = [&](const std::string& col) { return file + ":" + std::to_string(row) + ": column \"" + col + "\""; };
     while (std::getline(in, line)) {
         ++row;
         if (trim(line).empty() || trim(line)[0] == '#') continue;
         const auto cells = splitCsv(line);
         auto number = [&](size_t col, const std::string& colName) {
             if (col >= cells.size())
-                throw ConfigError(file.string() + ":" + std::to_string(row) + ": missing value in column \"" + colName + "\"");
+                throw ConfigError(file + ":" + std::to_string(row) + ": missing value in column \"" + colName + "\"");
             double v = 0;
             const std::string& cell = cells[col];
             const auto [ptr, ec] = std::from_chars(cell.data(), cell.data() + cell.size(), v);
             if (ec != std::errc() || ptr != cell.data() + cell.size())
-                throw ConfigError(file.string() + ":" + std::to_string(row) + ": column \"" + colName + "\" is not a number: \"" + excerpt(cell) + "\"");
+                throw ConfigError(file + ":" + std::to_string(row) + ": column \"" + colName + "\" is not a number: \"" + excerpt(cell) + "\"");
             return v;
         };
         const double l = number(lambdaCol, "wavelength_nm");
@@ -161,7 +168,7 @@ std::vector<TabulatedSpectrum> readSpectraCsv(const fs::path& file, const std::v
     }
     std::vector<TabulatedSpectrum> out;
     for (size_t i = 0; i < cols.size(); ++i)
-        out.emplace_back(lambda, values[i], file.string() + " column \"" + columns[i] + "\"");
+        out.emplace_back(lambda, values[i], file + " column \"" + columns[i] + "\"");
     return out;
 }
 
