@@ -16,26 +16,10 @@
 namespace fluorosim {
 namespace {
 
-ColorMatchingFunctions flatCmf() {
-    const TabulatedSpectrum one({360, 830}, {1, 1});
-    return {one, one, one};
-}
+using testing::flatCmf;
 
-// A scattering ball in a glowing enclosure: paths of varied length, so rows finish in varied order.
-Scene ballScene() {
-    Scene scene;
-    testing::addEnclosure(scene, 20, 1.0);
-    const int m = testing::addMedium(scene, "fog", 0.05, 2.0, 0.6, 1.33);
-    scene.materials.push_back(makeDielectric(0.0));
-    testing::addInterfaceSphere(scene, Vec3(0, 0, 0), 1.0, m, kNone, 0);
-    scene.camera.position = Vec3(0, 0, -6);
-    scene.camera.frame = Frame{Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0, 0, 1)};
-    scene.camera.width = 10;
-    scene.camera.height = 12;
-    scene.camera.tanHalfFovY = 0.3;
-    scene.finalize();
-    return scene;
-}
+// Paths of varied length, so rows finish in varied order.
+Scene ballScene() { return testing::foggyBallScene(10, 12); }
 
 Film makeFilm(const Scene& s) { return Film(s.camera.width, s.camera.height, 400, 700, 25, flatCmf(), true); }
 
