@@ -1,7 +1,5 @@
-#include <atomic>
 #include <chrono>
 #include <cmath>
-#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -12,6 +10,7 @@
 
 #include "cli_checks.h"
 #include "commands.h"
+#include "interruption.h"
 #include "core/errors.h"
 #include "core/memory_cap.h"
 #include "core/message.h"
@@ -28,13 +27,6 @@ namespace fluorosim::app {
 namespace fs = std::filesystem;
 namespace {
 
-std::atomic<bool> gCancel{false};
-// The first SIGINT/SIGTERM asks the render to stop and keep its finished passes; a second one ends
-// the process at once (the default action), for someone who does not want to wait for the write.
-extern "C" void onSignal(int sig) {
-    gCancel.store(true);
-    std::signal(sig, SIG_DFL);
-}
 
 struct RenderArgs {
     std::string scene, output;
@@ -161,7 +153,6 @@ void runRender(const RenderArgs& a) {
     opt.validate();
     // One sample per pixel per pass: checkpoints stay fresh, and a cancelled pass loses little.
     opt.sppPerPass = 1;
-    opt.cancel = &gCancel;
     ProgressBar bar("render");
     opt.progress = [&](double f) { bar.update(f); };
     auto lastCheckpoint = std::chrono::steady_clock::now();
@@ -184,8 +175,7 @@ void runRender(const RenderArgs& a) {
             lastCheckpoint = now;
         }
     };
-    std::signal(SIGINT, onSignal);
-    std::signal(SIGTERM, onSignal);
+    opt.cancel = &installInterruptHandlers();
     RenderSummary s = render(scene, film, opt);
     bar.finish();
     if (s.sppCompleted == 0) throw Error("interrupted before the first pass finished; nothing written");
