@@ -294,6 +294,7 @@ std::vector<Case> cases() {
                  {"/camera/fov_y_deg", "wide", "expected a number"}});
     c.push_back({"SceneIsDirectory", "scene JSON", cli({"render", "{dir}", "-o", "{dir}/out.exr"}), 3, {"{dir}", "is a folder"}});
     c.push_back({"SceneIsDevNull", "scene JSON", cli({"render", "/dev/null", "-o", "{dir}/out.exr"}), 2, {"/dev/null", "malformed JSON"}});
+    c.push_back({"SceneIsDevZero", "scene JSON", cli({"render", "/dev/zero", "-o", "{dir}/out.exr"}), 2, {"/dev/zero", "64 MiB"}});
     c.push_back({"SceneMissing", "scene JSON", cli({"render", "{dir}/nothing.json", "-o", "{dir}/out.exr"}), 3,
                  {"{dir}/nothing.json", "cannot open"}});
     // ---- meshes ----
@@ -324,6 +325,9 @@ std::vector<Case> cases() {
                      fs::create_directory(dir.file("refl.csv"));
                      return render(dir.write("scene.json", csvScene("refl.csv").dump()), dir);
                  }, 3, {"/materials/white/reflectance", "refl.csv", "is a folder"}});
+    c.push_back({"CsvIsDevZero", "spectrum CSV", [](const TempDir& dir) {
+                     return render(dir.write("scene.json", csvScene("/dev/zero").dump()), dir);
+                 }, 3, {"/materials/white/reflectance", "/dev/zero", "not a regular file"}});
     c.push_back({"CsvMissing", "spectrum CSV", [](const TempDir& dir) { return render(dir.write("scene.json", csvScene("none.csv").dump()), dir); },
                  3, {"/materials/white/reflectance", "none.csv"}});
     c.push_back({"CsvEmpty", "spectrum CSV", csv(""), 2, {"/materials/white/reflectance", "refl.csv", "header"}});
@@ -385,6 +389,11 @@ std::vector<Case> cases() {
                      return std::vector<std::string>{"voxelize", dir.file("cell.swc").string(), "--dye", "AF488", "--concentration", "10uM", "--voxel",
                                                      "1um", "-o", dir.file("out.vdb").string()};
                  }, 3, {"cell.swc", "is a folder"}});
+    c.push_back({"SwcIsDevZero", "SWC", cli({"voxelize", "/dev/zero", "--dye", "AF488", "--concentration", "10uM", "--voxel", "1um", "-o",
+                                             "{dir}/out.vdb"}), 3, {"/dev/zero", "not a regular file"}});
+    c.push_back({"MeshIsDevZero", "mesh", [](const TempDir& dir) {
+                     return render(dir.write("scene.json", meshScene("/dev/zero").dump()), dir);
+                 }, 3, {"/shapes/1/file", "/dev/zero", "not a regular file"}});
     c.push_back({"SwcOneKilometreNeurite", "SWC", swc(swcLine(1, 3, 0, 0, 0, 0.1, -1) + swcLine(2, 3, 1e9, 0, 0, 0.1, 1)), 2,
                  {"voxel size", "cell.swc", "memory cap of 512 MiB"}});
     c.push_back({"VoxelTwoHundredthMicronOnSample", "SWC", voxelizeSample({"--voxel", "0.02um"}), 2,
@@ -394,7 +403,7 @@ std::vector<Case> cases() {
     c.push_back({"VoxelZero", "CLI", voxelizeSample({"--voxel", "0um"}), 2, {"--voxel", "0um"}});
     c.push_back({"VoxelNaN", "CLI", voxelizeSample({"--voxel", "nan um"}), 2, {"--voxel", "nan um"}});
     c.push_back({"VoxelizeSupersamplingZero", "CLI", voxelizeSample({"--voxel", "1um", "--supersampling", "0"}), 2, {"supersampling", "0"}});
-    c.push_back({"VoxelizeThreads65537", "CLI", voxelizeSample({"--voxel", "1um", "--threads", "65537"}), 2, {"threads", "65537"}});
+    c.push_back({"VoxelizeThreads65537", "CLI", voxelizeSample({"--voxel", "1um", "--threads", "65537"}), 2, {"--threads", "65537"}});
     c.push_back({"VoxelizeOutputInProc", "CLI", cli({"voxelize", (kSource / "samples/neurons/C231296A-P3.CNG.swc").string(), "--dye", "AF488",
                                                      "--concentration", "10uM", "--voxel", "1um", "-o", "/proc/out.vdb"}), 3,
                  {"/proc/out.vdb", "not writable"}});
@@ -442,6 +451,8 @@ std::vector<Case> cases() {
                  {"--threads", "65537"}});
     c.push_back({"EmissionOutputMissingFolder", "CLI", cli({"validate", "emission", "--dye", "AF488", "--excitation", "495", "-o",
                                                             "{dir}/none/e.json"}), 3, {"{dir}/none", "does not exist"}});
+    c.push_back({"SweepThreads65537", "CLI", cli({"validate", "sweep", "--dye", "AF488", "--threads", "65537", "-o", "{dir}/s.json"}), 2,
+                 {"--threads", "65537"}});
     c.push_back({"SweepOutputIsDirectory", "CLI", cli({"validate", "sweep", "--dye", "AF488", "-o", "{dir}"}), 3, {"is a folder"}});
     c.push_back({"EmissionSppZero", "CLI", cli({"validate", "emission", "--dye", "AF488", "--excitation", "495", "--spp", "0", "-o",
                                                 "{dir}/e.json"}), 2, {"--spp", "0"}});
@@ -467,8 +478,13 @@ TEST_P(BadInput, OneLineErrorNamingFieldAndValue) {
     const testing::RunResult r = testing::runCli(dir, args, 60);
     // In the XML report (--gtest_output=xml), from which docs/reliability.md tabulates the cases.
     RecordProperty("input", c.input);
+    std::string command;
+    for (const std::string& a : args) command += (command.empty() ? "" : " ") + excerptForLog(a).substr(0, 120);
+    RecordProperty("command", command);
+    RecordProperty("folder", dir.path().string());
     RecordProperty("exit_code", r.exitCode);
     RecordProperty("message", excerptForLog(r.err));
+    RecordProperty("peak_rss_mib", static_cast<int>(r.maxRssKb / 1024));
     EXPECT_NE(r.exitCode, 124) << "timed out (a hang)";
     EXPECT_EQ(r.exitCode, c.exitCode) << "stderr: " << excerptForLog(r.err);
     ASSERT_LT(r.err.size(), 2500u) << "the message echoes too much input: " << excerptForLog(r.err);
@@ -478,7 +494,9 @@ TEST_P(BadInput, OneLineErrorNamingFieldAndValue) {
         parts.push_back(m);
     }
     testing::expectOneLineError(r, parts);
-    if (kMeasureMemory) EXPECT_LT(r.maxRssKb, kCapKb + kBaselineKb) << "peak memory beyond the cap";
+    if (kMeasureMemory) {
+        EXPECT_LT(r.maxRssKb, kCapKb + kBaselineKb) << "peak memory beyond the cap";
+    }
     EXPECT_TRUE(r.out.empty()) << excerptForLog(r.out);
 }
 
