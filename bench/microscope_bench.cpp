@@ -9,12 +9,9 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <nlohmann/json.hpp>
 
 #include "bench_support.h"
 #include "optics/acquisition.h"
-#include "optics/light_sheet.h"
-#include "scene/scene_loader.h"
 
 namespace {
 
@@ -27,31 +24,21 @@ const fs::path kScene = fs::path(FLUOROSIM_SOURCE_DIR) / "samples" / "lightsheet
 
 struct Setup {
     Scene scene;
-    optics::ObjectiveOptions objective;
-    optics::FocalPlane focus;
-    optics::Filter filter = optics::Filter::open();
-    optics::DetectorOptions detector;
-    Setup()
-        : scene(bench::loadBenchScene(kScene)) {
-        scene.lights.erase(scene.lights.begin());  // keep the 561 nm sheet
-        const nlohmann::json m = nlohmann::json::parse(scene.microscopeJson);
-        objective.na = m["objective"]["na"];
-        objective.magnification = m["objective"]["magnification"];
-        objective.workingDistanceMm = 0.2;
-        focus.centreMm = Vec3(0.017, -0.284, 0);
-        filter = optics::Filter::fromDatabase(db(), "semrock_FF01-609-54");
-        detector.exposureS = 0.02;
+    optics::Microscope microscope;
+    size_t channel;
+    Setup() : scene(bench::loadBenchScene(kScene)), microscope(optics::Microscope::fromScene(scene, db())) {
+        channel = microscope.channelIndex("AF594");
+        microscope.width = microscope.height = 128;
+        microscope.stack.planes = 64;
+        microscope.stack.stepMm = 0.002;
     }
-    optics::PlaneResult plane(int spp, uint64_t seed, double zMm = 0, int threads = 1) {
-        for (Light& l : scene.lights) std::get<BeamLight>(l).profile->moveTo(zMm);
-        optics::FocalPlane f = focus;
-        f.centreMm = focus.centreMm + Vec3(0, 0, zMm);
-        optics::PlaneRenderOptions o;
-        o.width = o.height = 128;
+    // Plane k of a 64-plane stack (k = 32 is 1 um above the focus of the scene).
+    optics::PlaneImage plane(int spp, uint64_t seed, int k = 32, int threads = 1) {
+        optics::AcquireOptions o;
         o.spp = spp;
         o.seed = seed;
         o.threads = threads;
-        return optics::renderPlane(scene, objective, f, filter, detector, o);
+        return optics::acquirePlane(scene, microscope, channel, k, o);
     }
 };
 
@@ -65,10 +52,10 @@ void BM_NeuronPlane(benchmark::State& state) {
         state.SkipWithError("run samples/neurons/make_volume.sh first");
         return;
     }
-    static const std::vector<double> reference = setup().plane(64, 999, 0, 0).electrons;
+    static const std::vector<double> reference = setup().plane(64, 999, 32, 0).electrons;
     const int spp = static_cast<int>(state.range(0));
     for (auto _ : state) {
-        const optics::PlaneResult r = setup().plane(spp, 7);
+        const optics::PlaneImage r = setup().plane(spp, 7);
         const double rmse = bench::relativeRmse(r.electrons, reference);
         state.counters["relative_rmse"] = rmse;
         state.counters["seconds"] = r.seconds;
@@ -84,7 +71,7 @@ void BM_NeuronStack64(benchmark::State& state) {
     }
     for (auto _ : state) {
         double seconds = 0;
-        for (int k = 0; k < 64; ++k) seconds += setup().plane(1, 7, (k - 31.5) * 0.002, 0).seconds;
+        for (int k = 0; k < 64; ++k) seconds += setup().plane(1, 7, k, 0).seconds;
         state.counters["seconds_per_plane"] = seconds / 64;
         state.counters["seconds_total"] = seconds;
     }

@@ -176,12 +176,6 @@ double LightSheet::waistAt(double xMm, double lambdaNm) const {
     return beamRadiusMm(waistMm(lambdaNm), xMm, lambdaNm, options_.refractiveIndex);
 }
 
-void LightSheet::moveTo(double normalOffsetMm) {
-    if (!std::isfinite(normalOffsetMm)) throw ConfigError("light sheet offset: must be finite, got " + num(normalOffsetMm));
-    offsetMm_ = normalOffsetMm;
-    centre_ = options_.centreMm + n_ * normalOffsetMm;
-}
-
 SheetCoordinates LightSheet::local(const Vec3& p) const {
     const Vec3 d = p - centre_;
     return {dot(d, u_), dot(d, h_), dot(d, n_)};

@@ -129,7 +129,7 @@ struct LightSheetOptions {
 };
 
 // Position of a point in the sheet frame (mm): x along propagation from the focus, y along the
-// height, z along the normal from the (moved) sheet plane.
+// height, z along the normal from the sheet plane.
 struct SheetCoordinates {
     double x = 0, y = 0, z = 0;
 };
@@ -151,10 +151,6 @@ public:
     // Power of one side, W (half of powerMw when dual).
     double sidePowerW() const { return sidePowerW_; }
 
-    // Moves the sheet along its normal to `normalOffsetMm` from the options' centre (absolute, not
-    // cumulative): z-stacks step the sheet through the sample.
-    void moveTo(double normalOffsetMm) override;
-    double normalOffsetMm() const { return offsetMm_; }
     Vec3 centre() const { return centre_; }
     Vec3 propagationAxis() const { return u_; }
     Vec3 normalAxis() const { return n_; }
@@ -165,7 +161,6 @@ private:
     LightSheetOptions options_;
     Spectrum spectrum_;
     Vec3 u_, n_, h_, centre_;
-    double offsetMm_ = 0;
     double sidePowerW_ = 0;
 };
 
@@ -194,7 +189,6 @@ public:
     Vec3 direction(int side) const override;
     double irradiance(const Vec3& p, int side, double lambdaNm) const override;
     const Spectrum& spectrum() const override { return spectrum_; }
-    void moveTo(double) override {}  // widefield light fills the field at every depth
 
 private:
     WidefieldOptions options_;

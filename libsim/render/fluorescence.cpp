@@ -12,15 +12,17 @@ namespace {
 // 1 cut the standard error about 3x at about the same run time; 8 keeps dense media cheaper.
 constexpr double kBranchBoost = 8.0;
 constexpr double kGridBranchesPerVoxel = 4.0;
+// Objects larger than this keep the branch cap of max(σt, 1/mm) (kGridBranchesPerVoxel per 4 mm).
+constexpr double kLargestFeatureMm = 4.0;
 
 struct LightSpectra {
     std::vector<double> lines;
     bool continuous = false;
 };
 
-LightSpectra lightSpectra(const Scene& scene) {
+LightSpectra lightSpectra(const std::vector<Light>& lights) {
     LightSpectra out;
-    for (const Light& light : scene.lights) {
+    for (const Light& light : lights) {
         const Spectrum& s = emissionSpectrum(light);
         for (const SpectralLine& line : s.spectralLines()) out.lines.push_back(line.lambdaNm);
         out.continuous = out.continuous || s.hasContinuousPart();
@@ -38,7 +40,7 @@ bool canEmit(const Medium& m, size_t dye) { return maxMolar(m, dye) > 0 && m.dye
 double featureSizeMm(const Scene& scene, int medium) {
     const Medium& m = scene.media[static_cast<size_t>(medium)];
     if (const VolumeFields* v = m.volume()) return v->voxelSizeMm();
-    double size = kGridBranchesPerVoxel;
+    double size = kLargestFeatureMm;
     for (uint32_t s = 0; s < scene.shapes.size(); ++s) {
         if (!scene.shapes[s].isInterface || scene.shapes[s].insideMedium != medium) continue;
         if (scene.geometry.isSphere(s)) {
@@ -92,8 +94,8 @@ DyeBands dyeBands(const Scene& scene) {
     return b;
 }
 
-WavelengthSampler makeExcitationSampler(const Scene& scene, bool& possible) {
-    const LightSpectra lights = lightSpectra(scene);
+WavelengthSampler makeExcitationSampler(const Scene& scene, const std::vector<Light>& sceneLights, bool& possible) {
+    const LightSpectra lights = lightSpectra(sceneLights);
     const DyeBands bands = dyeBands(scene);
     std::vector<double> lines;
     for (double l : lights.lines)
@@ -112,8 +114,8 @@ WavelengthSampler makeExcitationSampler(const Scene& scene, bool& possible) {
 
 }  // namespace
 
-WavelengthSampler cameraWavelengthSampler(const Scene& scene, bool fluorescenceActive) {
-    const LightSpectra lights = lightSpectra(scene);
+WavelengthSampler cameraWavelengthSampler(const Scene& scene, const std::vector<Light>& sceneLights, bool fluorescenceActive) {
+    const LightSpectra lights = lightSpectra(sceneLights);
     const double lo = scene.spectral.lambdaMin, hi = scene.spectral.lambdaMax;
     if (lights.continuous || !fluorescenceActive) return WavelengthSampler(lo, hi, lights.lines, lights.continuous);
     const Interval emission = dyeBands(scene).emission.clipped(lo, hi);
@@ -144,8 +146,8 @@ WavelengthSampler cameraWavelengthSampler(const Scene& scene, bool fluorescenceA
     return sampler;
 }
 
-FluorescencePlan::FluorescencePlan(const Scene& scene)
-    : model_(scene.render.fluorescence), excitation_(makeExcitationSampler(scene, active_)) {
+FluorescencePlan::FluorescencePlan(const Scene& scene, const std::vector<Light>& lights)
+    : model_(scene.render.fluorescence), excitation_(makeExcitationSampler(scene, lights, active_)) {
     if (model_ == FluorescenceModel::None) active_ = false;
     media_.resize(scene.media.size());
     std::vector<double> featureSize(scene.media.size());  // scans the enclosing meshes once per medium

@@ -13,11 +13,16 @@ namespace fluorosim {
 // Camera wavelengths: the lights' lines (elastic light seen directly) plus a continuous part. The
 // continuous part spans the spectral range when some light is continuous; when every light is a
 // line it spans only where the scene's dyes emit (nothing else can arrive at other wavelengths).
-WavelengthSampler cameraWavelengthSampler(const Scene& scene, bool fluorescenceActive);
+WavelengthSampler cameraWavelengthSampler(const Scene& scene, const std::vector<Light>& lights, bool fluorescenceActive);
+inline WavelengthSampler cameraWavelengthSampler(const Scene& scene, bool fluorescenceActive) {
+    return cameraWavelengthSampler(scene, scene.lights, fluorescenceActive);
+}
 
 class FluorescencePlan {
 public:
-    explicit FluorescencePlan(const Scene& scene);
+    explicit FluorescencePlan(const Scene& scene) : FluorescencePlan(scene, scene.lights) {}
+    // With the lights a render uses instead of the scene's (a microscope channel's).
+    FluorescencePlan(const Scene& scene, const std::vector<Light>& lights);
 
     // False when the model is None or no medium holds a dye that can emit (zero concentration, Φ = 0,
     // or no light and no other dye's emission inside the dye's absorption band).

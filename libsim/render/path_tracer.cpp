@@ -1,8 +1,10 @@
 #include "render/path_tracer.h"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 
+#include "core/errors.h"
 #include "core/math.h"
 #include "core/sampling.h"
 #include "media/free_flight.h"
@@ -22,6 +24,16 @@ SampledSpectrum clampZero(const SampledSpectrum& s) {
 }
 
 }  // namespace
+
+PathTracer::PathTracer(const Scene& scene)
+    : scene_(scene), lightList_(scene.lights), lights_(scene, lightList_), fluorescence_(scene, lightList_) {}
+
+PathTracer::PathTracer(const Scene& scene, std::vector<Light> lights)
+    : scene_(scene), lightList_(std::move(lights)), lights_(scene, lightList_), fluorescence_(scene, lightList_) {
+    const auto isArea = [](const Light& l) { return std::holds_alternative<AreaLight>(l); };
+    if (std::any_of(scene.lights.begin(), scene.lights.end(), isArea) || std::any_of(lightList_.begin(), lightList_.end(), isArea))
+        throw ConfigError("a separate light list cannot be used with emitting shapes (their lights are indexed by shape)");
+}
 
 int PathTracer::mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const Vec3& dir, int current) const {
     if (!shape.isInterface) return current;
@@ -119,7 +131,10 @@ struct PathTracer::PathState {
     Ray ray;
     int medium = kNone;
     SampledSpectrum beta{1.0}, r_u{1.0}, r_l{1.0};
-    bool specularBounce = false;
+    // Whether the last vertex sampled the lights (next-event estimation). A hit on an area light is
+    // weighed against that sample by MIS; without it (camera rays, specular bounces) it counts fully.
+    // Excitation sub-paths do NEE at their first vertex whatever their depth.
+    bool lightSampledAtLastVertex = false;
     double etaScale = 1.0;
     int depth = 0;
     Vec3 prevScatter;
@@ -128,11 +143,14 @@ struct PathTracer::PathState {
     double tMin = 0;                // > 0 when ray.o lies on the surface the ray leaves
 };
 
-PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const {
+PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats,
+                                  const PathStart& start) const {
     ++stats.paths;
     PathState state;
     state.ray = ray;
     state.medium = medium;
+    state.beta = start.beta;
+    state.r_u = start.r_u;
     state.prevScatter = ray.o;
     return trace(state, wl, rng, stats);
 }
@@ -214,17 +232,21 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
     Ray& ray = st.ray;
     int& medium = st.medium;
     int& depth = st.depth;
-    bool& specularBounce = st.specularBounce;
+    bool& lightSampledAtLastVertex = st.lightSampledAtLastVertex;
     double& etaScale = st.etaScale;
     Vec3& prevScatter = st.prevScatter;
-    // Roulette on the MIS-weighted throughput; survivors are rescaled so max(rrBeta) <= 1 afterwards.
-    auto survivesRoulette = [&]() {
-        const SampledSpectrum rrBeta = beta * etaScale / r_u.average();
-        if (rrBeta.maxComponent() < 1 && depth > 1) {
-            const double q = std::max(0.0, 1.0 - rrBeta.maxComponent());
-            if (rng.uniform() < q) return false;
-            beta /= 1.0 - q;
-        }
+    // Roulette on the MIS-weighted throughput (pbrt's rule: survival min(1, max β)). After a specular
+    // bounce survival is also capped at 0.95 (Mitsuba 3's rule), so a chain of lossless reflections
+    // (total internal reflection in a clear box) ends after about 20 more vertices; dividing by the
+    // survival keeps it unbiased. Medium scattering keeps the uncapped rule: in an optically thick,
+    // non-absorbing medium a path needs thousands of scattering events to escape, and a cap there would
+    // grow the surviving weights as 0.95^-n, with a variance that explodes with depth.
+    auto survivesRoulette = [&](bool specular) {
+        if (depth <= 1) return true;
+        const double q = std::min(specular ? 0.95 : 1.0, (beta * etaScale / r_u.average()).maxComponent());
+        if (q >= 1) return true;
+        if (!(rng.uniform() < q)) return false;
+        beta /= q;
         return true;
     };
 
@@ -263,7 +285,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         const Vec3 wi = phase.sample(dirIn, rng.uniform(), rng.uniform(), &phasePdf);
         r_l = r_u / phasePdf;
         prevScatter = p;
-        specularBounce = false;
+        lightSampledAtLastVertex = true;
         ray = Ray{p, wi};
     };
 
@@ -373,7 +395,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                 });
             if (terminated || !beta || !r_u) return {L, Lf};
             if (scattered) {
-                if (!survivesRoulette()) return {L, Lf};
+                if (!survivesRoulette(false)) return {L, Lf};
                 continue;
             }
             beta *= T_maj / T_maj[0];
@@ -387,7 +409,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             const auto& light = std::get<AreaLight>(scene_.lights[static_cast<size_t>(shape.areaLight)]);
             const SampledSpectrum Le = lights_.emitted(light, hit->n, -ray.d, wl);
             if (Le) {
-                if (depth == 0 || specularBounce) L += beta * Le / r_u.average();
+                if (!lightSampledAtLastVertex) L += beta * Le / r_u.average();
                 else {
                     const double lightPdf = lights_.pdf(prevScatter, hit->shape, hit->p, hit->n);
                     L += beta * Le / (r_u + r_l * lightPdf).average();
@@ -430,14 +452,14 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         const Vec3 wi = frame.toWorld(bs->wi);
         beta *= bs->f * std::abs(bs->wi.z) / bs->pdf;
         r_l = r_u / bs->pdf;
-        specularBounce = bs->specular;
+        lightSampledAtLastVertex = !bs->specular;
         if (bs->transmission) etaScale *= sqr(bs->etap);
         prevScatter = hit->p;
         medium = mediumAfterCrossing(shape, hit->n, wi, medium);
         ray = Ray{hit->p, wi};
         st.tMin = leavingTMin(n, wi, hit->epsilon);
         if (!beta) break;
-        if (!survivesRoulette()) break;
+        if (!survivesRoulette(bs->specular)) break;
     }
     return {L, Lf};
 }

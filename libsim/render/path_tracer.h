@@ -2,7 +2,8 @@
 // Unbiased spectral volumetric path tracer (pbrt-v4's VolPathIntegrator design): hero wavelengths
 // with path-space spectral MIS through rescaled path pdfs (r_u, r_l), next-event estimation with
 // MIS at surfaces and in media, free flights through sampleTmaj, and Russian roulette on the
-// MIS-weighted throughput (bounded by 1, so surviving weights cannot explode).
+// MIS-weighted throughput; after specular bounces survival is at most 0.95 (Mitsuba 3's rule), so
+// that light trapped without loss by total internal reflection still ends after a few vertices.
 //
 // Fluorescence: at every tentative collision in a dyed medium a camera path branches, with a
 // probability set by FluorescencePlan::branchDensity, into an excitation sub-path that estimates the
@@ -44,11 +45,24 @@ struct PathRadiance {
     SampledSpectrum total() const { return elastic + fluorescent; }
 };
 
+// What sampling before a camera path gave each wavelength: a caller that draws part of the path itself
+// (a PSF displacement at the hero wavelength) passes the throughput f_j/p_0 and the pdf ratios p_j/p_0
+// of that part, so that the tracer's spectral MIS weighs the whole path (pbrt-v4 passes beta and r_u
+// into Li). A product of two separately normalized one-sample MIS weights would be biased.
+struct PathStart {
+    SampledSpectrum beta{1.0}, r_u{1.0};
+};
+
 class PathTracer {
 public:
-    explicit PathTracer(const Scene& scene) : scene_(scene), lights_(scene), fluorescence_(scene) {}
+    explicit PathTracer(const Scene& scene);
+    // Renders with `lights` instead of the scene's (a microscope channel's lights at one plane): the
+    // scene stays untouched and shared. Throws ConfigError if the scene or `lights` has an area light
+    // (its shape's index would not match).
+    PathTracer(const Scene& scene, std::vector<Light> lights);
     // Radiance arriving along -ray.d at ray.o, for a ray that starts in `medium`.
-    PathRadiance radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;
+    PathRadiance radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats,
+                          const PathStart& start = {}) const;
     // (1/4π)∫ L dω at a point p in `medium`: the mean radiance that excites a dye there, estimated by a
     // path that starts at p in an isotropic direction (as the fluorescence sub-paths do).
     PathRadiance meanRadiance(const Vec3& p, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;
@@ -61,6 +75,7 @@ public:
                                   const Vec3* surfaceNormal = nullptr, double surfaceEpsilon = 0.0) const;
 
     const FluorescencePlan& fluorescence() const { return fluorescence_; }
+    const std::vector<Light>& lights() const { return lightList_; }
 
 private:
     struct PathState;
@@ -85,6 +100,7 @@ private:
     int mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const Vec3& dir, int current) const;
 
     const Scene& scene_;
+    std::vector<Light> lightList_;
     LightSampler lights_;
     FluorescencePlan fluorescence_;
 };

@@ -3,6 +3,7 @@
 // event estimation connects to it exactly: from p back along -direction(side) to where the beam
 // enters the scene, with the unattenuated irradiance profile at p times the transmittance of that
 // segment. The Gaussian light sheet implements this in optics/ (libsim never includes optics).
+// Profiles are immutable: a z-stack moves a sheet by wrapping it (optics::Microscope::lightsAt).
 #include <memory>
 #include <optional>
 
@@ -19,8 +20,6 @@ public:
     // Irradiance (W/mm²) of the unattenuated beam of `side` at p, per unit of normalised spectral weight.
     virtual double irradiance(const Vec3& p, int side, double lambdaNm) const = 0;
     virtual const Spectrum& spectrum() const = 0;     // normalised to total weight 1
-    // Moves the beam along its normal to `offsetMm` from where the scene put it (z-stacks).
-    virtual void moveTo(double offsetMm) = 0;
 };
 
 // What a scene file says about a light sheet (or, with `widefield`, an epi-illumination field: a

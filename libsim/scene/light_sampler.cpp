@@ -43,11 +43,11 @@ SampledSpectrum LightSampler::emitted(const AreaLight& light, const Vec3& n, con
 
 std::optional<LightSample> LightSampler::sample(const Vec3& ref, double uLight, double u1, double u2,
                                                 const SampledWavelengths& wl) const {
-    const size_t count = scene_.lights.size();
+    const size_t count = lights_.size();
     if (count == 0) return std::nullopt;
     const size_t index = std::min(count - 1, static_cast<size_t>(uLight * static_cast<double>(count)));
     const double selectPdf = 1.0 / static_cast<double>(count);
-    const Light& light = scene_.lights[index];
+    const Light& light = lights_[index];
     LightSample ls;
     const PointLight* pl = std::get_if<PointLight>(&light);
     const SpotLight* sl = std::get_if<SpotLight>(&light);
@@ -141,14 +141,14 @@ double LightSampler::pdf(const Vec3& ref, uint32_t shape, const Vec3& pLight, co
         if (!cone.inside) {
             // Only the cap facing the reference point is ever sampled.
             if (dot(nLight, ref - pLight) <= 0) return 0.0;
-            return cone.solidAnglePdf() / static_cast<double>(scene_.lights.size());
+            return cone.solidAnglePdf() / static_cast<double>(lights_.size());
         }
     }
     const Vec3 d = pLight - ref;
     const double dist2 = dot(d, d);
     const double cosLight = std::abs(dot(nLight, d)) / std::sqrt(dist2);
     if (cosLight <= 0) return 0.0;
-    return dist2 / (scene_.geometry.area(shape) * cosLight) / static_cast<double>(scene_.lights.size());
+    return dist2 / (scene_.geometry.area(shape) * cosLight) / static_cast<double>(lights_.size());
 }
 
 }  // namespace fluorosim

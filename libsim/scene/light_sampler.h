@@ -23,7 +23,10 @@ struct LightSample {
 
 class LightSampler {
 public:
-    explicit LightSampler(const Scene& scene) : scene_(scene) {}
+    // Samples `lights` (the scene's own by default; both must outlive the sampler). An area light in a
+    // separate light list would not match its shape's index, so such lists hold no area lights.
+    explicit LightSampler(const Scene& scene) : scene_(scene), lights_(scene.lights) {}
+    LightSampler(const Scene& scene, const std::vector<Light>& lights) : scene_(scene), lights_(lights) {}
     std::optional<LightSample> sample(const Vec3& ref, double uLight, double u1, double u2, const SampledWavelengths& wl) const;
     // Solid-angle pdf of sampling point `pLight` (normal nLight) on the area light of `shape` from `ref`.
     double pdf(const Vec3& ref, uint32_t shape, const Vec3& pLight, const Vec3& nLight) const;
@@ -32,6 +35,7 @@ public:
 
 private:
     const Scene& scene_;
+    const std::vector<Light>& lights_;
 };
 
 }  // namespace fluorosim

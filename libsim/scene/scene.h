@@ -11,6 +11,7 @@
 #include "materials/material.h"
 #include "media/medium.h"
 #include "scene/beam.h"
+#include "scene/scene_field.h"
 #include "spectral/spectrum.h"
 
 namespace fluorosim {
@@ -95,7 +96,7 @@ struct Scene {
     SpectralSettings spectral;
     RenderSettings render;
     std::vector<std::string> warnings;  // things the user must know that are not errors
-    std::string microscopeJson;         // the "microscope" block, read by optics/ and the acquire command
+    std::optional<SceneField> microscope;  // the "microscope" block, read by optics::Microscope::fromScene
 
     // Refractive index on each side of an interface (1 where no medium is given).
     double ior(int medium) const { return medium == kNone ? 1.0 : media[static_cast<size_t>(medium)].ior(); }

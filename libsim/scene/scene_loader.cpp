@@ -261,7 +261,7 @@ public:
         Scene scene;
         if (r.has("microscope")) {
             r.at("microscope").requireObject();
-            scene.microscopeJson = r.at("microscope").raw().dump();
+            scene.microscope = SceneField::parse(r.at("microscope").raw().dump(), "/microscope", file_);
         }
         if (r.has("spectral")) loadSpectral(r.at("spectral"), scene);
         if (r.has("render")) loadRender(r.at("render"), scene);

@@ -4,6 +4,9 @@
 
 #include <cstdio>
 
+#include "core/sampling.h"
+#include "materials/material.h"
+#include "support/fluorescent_scenes.h"
 #include "support/test_scenes.h"
 
 namespace fluorosim {
@@ -129,6 +132,63 @@ TEST(WhiteFurnace, ChromaticScattering) {
     const auto e = meanRadiance(scene, Vec3(0, 0, -8), kNone, Vec3(0, 0, 0), 1.0, 40000, 21, 380, 720);
     EXPECT_NEAR(e.mean, 2.0, 4 * e.stderr_) << "stderr " << e.stderr_;
     EXPECT_GT(e.stderr_, 0.0);
+}
+
+// A smooth glass cube traps light by total internal reflection: from inside, directions whose three
+// cosines all lie below the critical cosine never leave, and nothing is lost per reflection. Paths must
+// still end after a bounded number of vertices (roulette survival is capped below 1), and from outside
+// the cube the furnace field must come back unchanged (every ray that enters can leave).
+Scene glassCubeFurnace() {
+    Scene scene;
+    addEnclosure(scene, 20.0, kLe);
+    const int glass = addMedium(scene, "glass", 0.0, 0.0, 0.0, 1.5);
+    testing::addMediumBox(scene, Vec3(-1, -1, -1), Vec3(1, 1, 1), glass);
+    scene.materials.push_back(makeDielectric(0.0));
+    scene.materialNames.push_back("glass");
+    scene.shapes.back().material = 0;
+    scene.finalize();
+    return scene;
+}
+
+TEST(TrappedLight, GlassCubeInFurnaceReturnsTheFieldWithBoundedPaths) {
+    const Scene scene = glassCubeFurnace();
+    const PathTracer tracer(scene);
+    const WavelengthSampler ws(400, 700, {}, true);
+    PathStats stats;
+    const auto e = testing::meanOf(40000, [&](int i) {
+        Rng rng = Rng::forKey(13, static_cast<uint64_t>(i), 2);
+        const SampledWavelengths wl = ws.sample(rng.uniform(), rng.uniform());
+        const Vec3 target(1.8 * rng.uniform() - 0.9, 1.8 * rng.uniform() - 0.9, 0);
+        const Vec3 origin(0.3, -0.2, -8);
+        return tracer.radiance(Ray{origin, normalize(target - origin)}, kNone, wl, rng, stats).total().average();
+    });
+    const double vertices = double(stats.surfaceBounces + stats.scatteringEvents) / double(stats.paths);
+    std::printf("  glass cube from outside: %.5f +- %.2g (field %.3f), %.2f vertices per path, %llu truncated\n", e.mean, e.stderr_, kLe,
+                vertices, static_cast<unsigned long long>(stats.truncated));
+    EXPECT_LT(e.stderr_, 0.02 * kLe);
+    EXPECT_NEAR(e.mean, kLe, 4 * e.stderr_);
+    EXPECT_EQ(stats.truncated, 0u);
+    EXPECT_LT(vertices, 30.0);
+}
+
+TEST(TrappedLight, CameraInsideGlassCubeEndsEveryPath) {
+    const Scene scene = glassCubeFurnace();
+    const PathTracer tracer(scene);
+    const WavelengthSampler ws(400, 700, {}, true);
+    PathStats stats;
+    const auto e = testing::meanOf(20000, [&](int i) {
+        Rng rng = Rng::forKey(14, static_cast<uint64_t>(i), 2);
+        const SampledWavelengths wl = ws.sample(rng.uniform(), rng.uniform());
+        return tracer.radiance(Ray{Vec3(0.1, 0.2, 0.3), sampleUniformSphere(rng.uniform(), rng.uniform())}, 0, wl, rng, stats)
+            .total()
+            .average();
+    });
+    const double vertices = double(stats.surfaceBounces + stats.scatteringEvents) / double(stats.paths);
+    std::printf("  camera inside the cube: %.5f +- %.2g, %.2f vertices per path, %llu truncated\n", e.mean, e.stderr_, vertices,
+                static_cast<unsigned long long>(stats.truncated));
+    EXPECT_TRUE(std::isfinite(e.mean));
+    EXPECT_EQ(stats.truncated, 0u);
+    EXPECT_LT(vertices, 30.0);
 }
 
 }  // namespace

@@ -4,7 +4,10 @@
 // unwritable output.
 #include <gtest/gtest.h>
 
+#include <signal.h>
+
 #include <nlohmann/json.hpp>
+#include <tuple>
 
 #include "optics/filter.h"
 #include "optics/ome_tiff.h"
@@ -205,6 +208,155 @@ TEST(AcquireCli, ChannelsShowBleedThroughBetweenDyes) {
     std::printf("  AF488 bead: green %.4g e-, red %.4g e-, bleed-through %.4f, spectral overlap ratio %.4f\n", green, red, red / green, in609 / in525);
     EXPECT_GT(red, 0.01 * green);
     EXPECT_NEAR(red / green, in609 / in525, 0.1 * in609 / in525);
+}
+
+// Random streams are keyed by channel name and plane: acquiring one channel alone gives the same
+// plane, bit for bit, as the full acquisition.
+TEST(AcquireCli, OneChannelAloneMatchesTheFullAcquisition) {
+    TempDir dir;
+    const fs::path scene = beads(dir, [](json& j) {
+        j["microscope"]["detector"]["width"] = j["microscope"]["detector"]["height"] = 40;
+        j["microscope"]["channels"].push_back(json{{"name", "wide"}, {"emission_filter", json{{"center", "560 nm"}, {"fwhm", "80 nm"}}}});
+    });
+    const fs::path both = dir.path() / "both.ome.tif", one = dir.path() / "one.ome.tif";
+    ASSERT_EQ(runCli(dir, {"acquire", scene.string(), "-o", both.string(), "--planes", "2", "--spp", "32"}).exitCode, 0);
+    ASSERT_EQ(runCli(dir, {"acquire", scene.string(), "-o", one.string(), "--planes", "2", "--spp", "32", "--channels", "wide"}).exitCode, 0);
+    const auto a = optics::readTiffStack(dir.path() / "both.expected.ome.tif", true), b = optics::readTiffStack(dir.path() / "one.expected.ome.tif", true);
+    ASSERT_EQ(a.pages, 4);
+    ASSERT_EQ(b.pages, 2);
+    const std::vector<double> wide(a.pixels.begin() + static_cast<std::ptrdiff_t>(a.pixels.size() / 2), a.pixels.end());
+    EXPECT_EQ(wide, b.pixels);
+    EXPECT_GT(*std::max_element(b.pixels.begin(), b.pixels.end()), 0.1);
+}
+
+TEST(AcquireCli, BadNumbersAreRejectedNotCast) {
+    TempDir dir;
+    const std::string out = (dir.path() / "s.ome.tif").string();
+    auto run = [&](const std::function<void(json&)>& edit, std::vector<std::string> extra = {}) {
+        std::vector<std::string> args{"acquire", beads(dir, edit).string(), "-o", out, "--spp", "1"};
+        if (std::find(extra.begin(), extra.end(), "--planes") == extra.end()) args.insert(args.end(), {"--planes", "1"});
+        args.insert(args.end(), extra.begin(), extra.end());
+        return runCli(dir, args);
+    };
+    const std::vector<std::tuple<std::function<void(json&)>, std::vector<std::string>, std::vector<std::string>>> cases{
+        {[](json& j) { j["microscope"]["stack"]["planes"] = 1e308; }, {}, {"/microscope/stack/planes", "[1, 4096]"}},
+        {[](json& j) { j["microscope"]["stack"]["planes"] = 2.7; }, {}, {"/microscope/stack/planes", "integer"}},
+        {[](json& j) { j["microscope"]["detector"]["bit_depth"] = 1e10; }, {}, {"/microscope/detector/bit_depth", "[8, 16]"}},
+        {[](json& j) { j["microscope"]["detector"]["width"] = 0; }, {}, {"/microscope/detector/width", "[1, 8192]"}},
+        {[](json& j) { j["microscope"]["focus"]["toward_objective"] = {0, 0, 0}; }, {}, {"/microscope/focus/toward_objective", "non-zero"}},
+        {[](json& j) { j["microscope"]["channels"][0]["lights"] = {4294967296.0}; }, {}, {"/microscope/channels/0/lights/0", "[0, 0]"}},
+        {[](json& j) { j["microscope"]["channels"][0]["lights"] = 0; }, {}, {"/microscope/channels/0/lights", "array"}},
+        {[](json& j) { j["microscope"]["channels"].push_back(j["microscope"]["channels"][0]); }, {}, {"/microscope/channels/1/name", "two channels"}},
+        {{}, {"--threads", "65537"}, {"--threads", "65537"}},
+        {{}, {"--seed", "-1"}, {"--seed", "-1"}},
+        {{}, {"--planes", "0"}, {"--planes", "0"}},
+        {{}, {"--step", "-1um"}, {"--step"}},
+    };
+    for (const auto& [edit, extra, parts] : cases) {
+        const auto r = run(edit, extra);
+        EXPECT_EQ(r.exitCode, 2) << parts[0] << "\n" << r.err;
+        SCOPED_TRACE(parts[0]);
+        expectOneLineError(r, parts);
+    }
+    // A stack of 8192 x 8192 pixels and 4096 planes is refused before anything is allocated.
+    const auto r = run([](json& j) {
+        j["microscope"]["detector"]["width"] = 8192;
+        j["microscope"]["detector"]["height"] = 8192;
+        j["microscope"]["stack"]["planes"] = 4096;
+    }, {"--planes", "4096"});
+    EXPECT_EQ(r.exitCode, 2);
+    expectOneLineError(r, {"/microscope", "8192 x 8192", "GiB", "cap"});
+}
+
+// Starts the CLI in the background; returns the path of a file that receives its exit code.
+struct BackgroundRun {
+    fs::path pidFile, rcFile;
+    long pid() const { return std::stol(readFile(pidFile)); }
+    bool finished() const { return fs::exists(rcFile) && !readFile(rcFile).empty(); }
+    int exitCode() const { return std::stoi(readFile(rcFile)); }
+};
+BackgroundRun startCli(const TempDir& dir, const std::vector<std::string>& args) {
+    BackgroundRun b{dir.path() / "pid.txt", dir.path() / "rc.txt"};
+    fs::remove(b.pidFile);
+    fs::remove(b.rcFile);
+    std::string cmd = quote(FLUOROSIM_CLI);
+    for (const auto& a : args) cmd += " " + quote(a);
+    const std::string script = cmd + " </dev/null >/dev/null 2>" + quote((dir.path() / "bg_stderr.txt").string()) + " & p=$!; echo $p > " +
+                               quote((dir.path() / "pid.tmp").string()) + "; mv " + quote((dir.path() / "pid.tmp").string()) + " " +
+                               quote(b.pidFile.string()) + "; wait $p; echo $? > " + quote((dir.path() / "rc.tmp").string()) + "; mv " +
+                               quote((dir.path() / "rc.tmp").string()) + " " + quote(b.rcFile.string());
+    std::system(("sh -c " + quote(script) + " &").c_str());
+    return b;
+}
+
+// Waits for `condition`; the limit only keeps a broken build from hanging the suite (it is a failure of
+// the behaviour, not a speed measurement).
+bool waitFor(const std::function<bool()>& condition) {
+    for (int i = 0; i < 60000; ++i) {
+        if (condition()) return true;
+        ::usleep(10000);
+    }
+    return false;
+}
+
+size_t checkpointRecords(const fs::path& checkpoint, size_t recordBytes) {
+    const std::string text = readFile(checkpoint);
+    const size_t first = text.find('\n'), second = first == std::string::npos ? first : text.find('\n', first + 1);
+    if (second == std::string::npos) return 0;
+    return (text.size() - second - 1) / recordBytes;
+}
+
+// SIGTERM in the middle of a stack keeps every finished plane: the checkpoint holds them, the complete
+// planes are written as valid stacks, and --resume finishes the run to exactly what an uninterrupted
+// run with the same seed gives.
+TEST(AcquireCli, InterruptedStackResumesToTheSameResult) {
+    TempDir dir;
+    const fs::path scene = beads(dir);
+    const std::vector<std::string> common{"--planes", "24", "--step", "0.5um", "--spp", "24", "--threads", "1", "--seed", "3"};
+    auto args = [&](const std::string& out, bool resume) {
+        std::vector<std::string> a{"acquire", scene.string(), "-o", (dir.path() / out).string()};
+        a.insert(a.end(), common.begin(), common.end());
+        if (resume) a.push_back("--resume");
+        return a;
+    };
+    ASSERT_EQ(runCli(dir, args("full.ome.tif", false), 600).exitCode, 0);
+
+    const BackgroundRun run = startCli(dir, args("cut.ome.tif", false));
+    const fs::path checkpoint = dir.path() / "cut.checkpoint";
+    const size_t recordBytes = 16 + 2 * sizeof(double) * 16 * 16;
+    ASSERT_TRUE(waitFor([&] { return fs::exists(run.pidFile) && fs::exists(checkpoint) && checkpointRecords(checkpoint, recordBytes) >= 3; }));
+    ASSERT_EQ(::kill(static_cast<pid_t>(run.pid()), SIGTERM), 0);
+    ASSERT_TRUE(waitFor([&] { return run.finished(); }));
+    ASSERT_EQ(run.exitCode(), 130) << readFile(dir.path() / "bg_stderr.txt");
+    const std::string err = readFile(dir.path() / "bg_stderr.txt");
+    EXPECT_TRUE(contains(err, "--resume")) << err;
+    const size_t kept = checkpointRecords(checkpoint, recordBytes);
+    EXPECT_GE(kept, 3u);
+    EXPECT_LT(kept, 24u) << "the run finished before it could be interrupted";
+    // The complete planes were written and open in the reader.
+    const auto partial = optics::readTiffStack(dir.path() / "cut.expected.ome.tif", true);
+    EXPECT_GE(partial.pages, 3);
+    const auto full = optics::readTiffStack(dir.path() / "full.expected.ome.tif", true);
+    ASSERT_EQ(full.pages, 24);
+    EXPECT_TRUE(std::equal(partial.pixels.begin(), partial.pixels.end(), full.pixels.begin()));
+
+    const auto resumed = runCli(dir, args("cut.ome.tif", true), 600);
+    ASSERT_EQ(resumed.exitCode, 0) << resumed.err;
+    EXPECT_TRUE(contains(resumed.err, "resuming")) << resumed.err;
+    for (const char* suffix : {".ome.tif", ".expected.ome.tif", ".stderr.ome.tif"}) {
+        const auto a = optics::readTiffStack(dir.path() / (std::string("cut") + suffix), true);
+        const auto b = optics::readTiffStack(dir.path() / (std::string("full") + suffix), true);
+        EXPECT_EQ(a.pages, 24) << suffix;
+        EXPECT_EQ(a.pixels, b.pixels) << suffix;
+    }
+    EXPECT_FALSE(fs::exists(checkpoint)) << "a finished run removes its checkpoint";
+
+    // A checkpoint from other options is refused.
+    ASSERT_EQ(runCli(dir, {"acquire", scene.string(), "-o", (dir.path() / "x.ome.tif").string(), "--planes", "2", "--spp", "1"}).exitCode, 0);
+    std::ofstream(dir.path() / "x.checkpoint") << "fluorosim acquire checkpoint 1\n{\"seed\":1}\n";
+    const auto mismatch = runCli(dir, {"acquire", scene.string(), "-o", (dir.path() / "x.ome.tif").string(), "--planes", "2", "--spp", "1", "--resume"});
+    EXPECT_EQ(mismatch.exitCode, 2);
+    expectOneLineError(mismatch, {"x.checkpoint", "another scene, seed or options"});
 }
 
 }  // namespace

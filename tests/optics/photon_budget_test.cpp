@@ -59,11 +59,10 @@ TEST(PhotonBudget, ThinDyeLayerUnderKnownSheetMatchesTheClosedFormChain) {
     band.centreNm = 650;
     band.fwhmNm = 60;
     const optics::Filter filter = optics::Filter::bandPass(band);
-    optics::PlaneRenderOptions o;
-    o.width = o.height = 16;
+    optics::AcquireOptions o;
     o.spp = 1000;
     o.seed = 5;
-    const optics::PlaneResult r = optics::renderPlane(scene, objective, optics::FocalPlane{}, filter, detector, o);
+    const optics::PlaneImage r = optics::renderPlane(scene, objective, optics::FocalPlane{}, filter, detector, 16, 16, o);
 
     // Closed form per pixel centre.
     constexpr double hc = 1.98644586e-16;  // J nm
@@ -74,9 +73,9 @@ TEST(PhotonBudget, ThinDyeLayerUnderKnownSheetMatchesTheClosedFormChain) {
     const double collection = 2 * kPi * (1 - cosMax) / (4 * kPi);
     const double pixelMm = 6.5e-3 / 16;
     double expected = 0, measured = 0, var = 0;
-    for (int y = 0; y < o.height; ++y)
-        for (int x = 0; x < o.width; ++x) {
-            const Vec3 p((x + 0.5 - 0.5 * o.width) * pixelMm, (0.5 * o.height - y - 0.5) * pixelMm, 0);
+    for (int y = 0; y < r.height; ++y)
+        for (int x = 0; x < r.width; ++x) {
+            const Vec3 p((x + 0.5 - 0.5 * r.width) * pixelMm, (0.5 * r.height - y - 0.5) * pixelMm, 0);
             // Mean irradiance through the layer's thickness (midpoint rule, 200 slices), attenuated from
             // where the sheet entered the layer at x = -half.
             double e = 0;
@@ -84,13 +83,13 @@ TEST(PhotonBudget, ThinDyeLayerUnderKnownSheetMatchesTheClosedFormChain) {
             e *= std::exp(-sigmaX * (p.x + half));
             const double absorbedPhotons = sigmaX * d * e / (hc / 488.0);  // per s per mm²
             expected += absorbedPhotons * dye.quantumYield() * collection * spectral * pixelMm * pixelMm * detector.exposureS;
-            const size_t i = static_cast<size_t>(y) * o.width + x;
+            const size_t i = static_cast<size_t>(y) * r.width + x;
             measured += r.electrons[i];
             var += r.stderrElectrons[i] * r.stderrElectrons[i];
         }
     const double se = std::sqrt(var);
     std::printf("  expected photoelectrons over 16x16 pixels: simulated %.6g +- %.2g, closed form %.6g, ratio %.5f (%.1f s), largest sample %.3g, mean sample %.3g\n",
-                measured, se, expected, measured / expected, r.seconds, r.largestSample, measured / (o.width * o.height));
+                measured, se, expected, measured / expected, r.seconds, r.largestSample, measured / (r.width * r.height));
     EXPECT_LT(se, 0.003 * expected) << "the check must resolve well below 1 %";
     EXPECT_NEAR(measured / expected, 1.0, 0.01);
     EXPECT_LT(std::abs(measured - expected), 4 * se);

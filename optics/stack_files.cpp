@@ -1,0 +1,148 @@
+#include "optics/stack_files.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+
+#include <unistd.h>
+
+#include "core/errors.h"
+#include "io/image_io.h"
+#include "optics/ome_tiff.h"
+
+namespace fluorosim::optics {
+namespace fs = std::filesystem;
+namespace {
+
+constexpr const char* kCheckpointMagic = "fluorosim acquire checkpoint 1";
+
+template <class T>
+std::vector<T> firstPlanes(const std::vector<T>& data, const Stack& stack, int planes) {
+    const size_t plane = static_cast<size_t>(stack.width) * stack.height;
+    std::vector<T> out;
+    out.reserve(plane * planes * stack.channels.size());
+    for (size_t c = 0; c < stack.channels.size(); ++c)
+        out.insert(out.end(), data.begin() + static_cast<std::ptrdiff_t>(stack.pixelOffset(c, 0)),
+                   data.begin() + static_cast<std::ptrdiff_t>(stack.pixelOffset(c, 0) + plane * planes));
+    return out;
+}
+
+struct RecordHeader {
+    uint32_t slot;
+    int32_t plane;
+    uint32_t width, height;
+};
+
+}  // namespace
+
+StackOutputs StackOutputs::forStack(const fs::path& stack) {
+    const std::string text = stack.string(), suffix = ".ome.tif";
+    if (text.size() <= suffix.size() || text.compare(text.size() - suffix.size(), suffix.size(), suffix) != 0)
+        throw ConfigError(text + ": output must end in .ome.tif");
+    const std::string base = text.substr(0, text.size() - suffix.size());
+    return {stack, base + ".expected.ome.tif", base + ".stderr.ome.tif", base + ".preview.png"};
+}
+
+void writeStackFiles(const StackOutputs& out, const Stack& stack, const Microscope& m, int planes, const std::string& description) {
+    StackMetadata meta;
+    meta.pixelSizeUm = m.pixelSizeMm() * 1e3;
+    meta.zStepUm = m.stack.stepMm * 1e3;
+    meta.exposureS = m.detector.exposureS;
+    meta.significantBits = m.detector.bitDepth;
+    for (size_t c : stack.channels) meta.channels.push_back({m.channels[c].name, m.channels[c].excitationNm, m.channels[c].emissionNm});
+    const int channels = static_cast<int>(stack.channels.size());
+    meta.description = description;
+    writeOmeTiffUint16(out.counts, stack.width, stack.height, planes, channels, firstPlanes(stack.counts, stack, planes), meta);
+    meta.description = description + "; expected photoelectrons (with dark current, before noise)";
+    writeOmeTiffFloat32(out.expected, stack.width, stack.height, planes, channels, firstPlanes(stack.expected, stack, planes), meta);
+    meta.description = description + "; Monte Carlo standard error of the expected photoelectrons";
+    writeOmeTiffFloat32(out.stderrElectrons, stack.width, stack.height, planes, channels, firstPlanes(stack.stderrElectrons, stack, planes),
+                        meta);
+    writeStackPreview(out.preview, stack, planes, meta.zStepUm / meta.pixelSizeUm);
+}
+
+void writeStackPreview(const fs::path& png, const Stack& stack, int planes, double zOverPixel) {
+    static const float colours[4][3] = {{0, 1, 0}, {1, 0, 1}, {1, 0, 0}, {0, 1, 1}};
+    const int width = stack.width, height = stack.height;
+    const int stretch = std::max(1, static_cast<int>(std::lround(zOverPixel)));
+    const int sliceRows = planes * stretch, gap = 4, outW = 2 * width + gap, outH = std::max(height, sliceRows);
+    std::vector<float> rgb(static_cast<size_t>(outW) * outH * 3, 0.0f);
+    const size_t plane = static_cast<size_t>(width) * height;
+    for (size_t c = 0; c < stack.channels.size(); ++c) {
+        const float* base = stack.expected.data() + stack.pixelOffset(c, 0);
+        std::vector<float> mip(plane, 0.0f);
+        for (int k = 0; k < planes; ++k)
+            for (size_t i = 0; i < plane; ++i) mip[i] = std::max(mip[i], base[k * plane + i]);
+        std::vector<float> sorted = mip;
+        std::sort(sorted.begin(), sorted.end());
+        const float scale = sorted[static_cast<size_t>(0.995 * (sorted.size() - 1))];
+        if (!(scale > 0)) continue;
+        const float* col = colours[c % 4];
+        auto put = [&](int x, int y, float v) {
+            const float t = std::min(1.0f, v / scale);
+            for (int k = 0; k < 3; ++k) rgb[(static_cast<size_t>(y) * outW + x) * 3 + k] += col[k] * t;
+        };
+        for (int y = 0; y < height; ++y)
+            for (int x = 0; x < width; ++x) put(x, y, mip[static_cast<size_t>(y) * width + x]);
+        for (int k = 0; k < planes; ++k)
+            for (int r = 0; r < stretch; ++r)
+                for (int x = 0; x < width; ++x) put(width + gap + x, k * stretch + r, base[k * plane + static_cast<size_t>(height / 2) * width + x]);
+    }
+    // The PNG writer applies the sRGB curve; these values are already display-scaled in [0, 1].
+    writePngPreview(png.string(), outW, outH, rgb, 1.0);
+}
+
+StackCheckpoint::StackCheckpoint(fs::path path, const std::string& fingerprint) : path_(std::move(path)) {
+    std::ofstream f(path_, std::ios::binary | std::ios::trunc);
+    f << kCheckpointMagic << '\n' << fingerprint << '\n';
+    f.flush();
+    if (!f) throw IoError(path_.string() + ": cannot write the checkpoint");
+}
+
+StackCheckpoint StackCheckpoint::resume(fs::path path, const std::string& fingerprint, Stack& stack, const Microscope& m, uint64_t seed) {
+    std::ifstream f(path, std::ios::binary);
+    if (!f) throw IoError(path.string() + ": no checkpoint to resume from");
+    std::string magic, stored;
+    std::getline(f, magic);
+    std::getline(f, stored);
+    if (magic != kCheckpointMagic) throw ConfigError(path.string() + ": not a Fluorosim acquisition checkpoint");
+    if (stored != fingerprint)
+        throw ConfigError(path.string() + ": the checkpoint was written for another scene, seed or options; run without --resume to start over");
+    std::streamoff good = f.tellg();
+    while (true) {
+        RecordHeader h{};
+        if (!f.read(reinterpret_cast<char*>(&h), sizeof h)) break;
+        if (h.slot >= stack.channels.size() || h.plane < 0 || h.plane >= stack.planes || static_cast<int>(h.width) != stack.width ||
+            static_cast<int>(h.height) != stack.height)
+            throw ConfigError(path.string() + ": a record does not fit the stack (corrupt checkpoint)");
+        PlaneImage image;
+        image.width = stack.width;
+        image.height = stack.height;
+        const size_t n = static_cast<size_t>(stack.width) * stack.height;
+        image.electrons.resize(n);
+        image.stderrElectrons.resize(n);
+        if (!f.read(reinterpret_cast<char*>(image.electrons.data()), static_cast<std::streamsize>(n * sizeof(double))) ||
+            !f.read(reinterpret_cast<char*>(image.stderrElectrons.data()), static_cast<std::streamsize>(n * sizeof(double))))
+            break;  // a record cut short: the plane is rendered again
+        storePlane(stack, m, h.slot, h.plane, image, seed);
+        good = f.tellg();
+    }
+    f.close();
+    fs::resize_file(path, static_cast<uintmax_t>(good));
+    return StackCheckpoint(std::move(path));
+}
+
+void StackCheckpoint::append(size_t slot, int plane, const PlaneImage& image) {
+    FILE* f = std::fopen(path_.c_str(), "ab");
+    if (!f) throw IoError(path_.string() + ": cannot append to the checkpoint");
+    const RecordHeader h{static_cast<uint32_t>(slot), plane, static_cast<uint32_t>(image.width), static_cast<uint32_t>(image.height)};
+    bool ok = std::fwrite(&h, sizeof h, 1, f) == 1;
+    ok = ok && std::fwrite(image.electrons.data(), sizeof(double), image.electrons.size(), f) == image.electrons.size();
+    ok = ok && std::fwrite(image.stderrElectrons.data(), sizeof(double), image.stderrElectrons.size(), f) == image.stderrElectrons.size();
+    ok = ok && std::fflush(f) == 0 && ::fsync(fileno(f)) == 0;
+    ok = (std::fclose(f) == 0) && ok;
+    if (!ok) throw IoError(path_.string() + ": cannot write to the checkpoint");
+}
+
+}  // namespace fluorosim::optics

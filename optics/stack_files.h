@@ -1,0 +1,47 @@
+#pragma once
+// Files of an acquisition: the OME-TIFF stacks (16-bit counts, float expected electrons and their
+// Monte Carlo standard errors), a preview PNG, and a checkpoint that holds every finished plane so
+// that an interrupted run resumes to the same result.
+#include <filesystem>
+#include <string>
+
+#include "optics/acquisition.h"
+
+namespace fluorosim::optics {
+
+struct StackOutputs {
+    std::filesystem::path counts, expected, stderrElectrons, preview;
+    // NAME.ome.tif -> NAME.expected.ome.tif, NAME.stderr.ome.tif, NAME.preview.png. ConfigError if
+    // `stack` does not end in .ome.tif.
+    static StackOutputs forStack(const std::filesystem::path& stack);
+};
+
+// Writes planes 0 .. planes-1 (all channels) of `stack`. `description` goes into the OME metadata.
+void writeStackFiles(const StackOutputs& out, const Stack& stack, const Microscope& microscope, int planes,
+                     const std::string& description);
+
+// The preview: maximum projection along z (left) and the x-z slice through the middle row (right, z
+// stretched to the true aspect) of the expected electrons; channel colours green, magenta, red,
+// cyan, each scaled to its 99.5th percentile.
+void writeStackPreview(const std::filesystem::path& png, const Stack& stack, int planes, double zOverPixel);
+
+// Checkpoint: a header with a fingerprint of everything that determines the result, then one record
+// per finished plane, each flushed to disk as it is written.
+class StackCheckpoint {
+public:
+    // Starts a new checkpoint file (replacing any). Throws IoError.
+    StackCheckpoint(std::filesystem::path path, const std::string& fingerprint);
+    // Opens an existing checkpoint to append to it, after loading its planes into `stack` (through
+    // storePlane, so the read-out is the same). Throws ConfigError if the fingerprint differs (another
+    // scene, seed or option), IoError if it cannot be read. A last record cut short by a kill is dropped.
+    static StackCheckpoint resume(std::filesystem::path path, const std::string& fingerprint, Stack& stack, const Microscope& microscope,
+                                  uint64_t seed);
+    void append(size_t channelSlot, int plane, const PlaneImage& image);
+    const std::filesystem::path& path() const { return path_; }
+
+private:
+    explicit StackCheckpoint(std::filesystem::path path) : path_(std::move(path)) {}
+    std::filesystem::path path_;
+};
+
+}  // namespace fluorosim::optics
