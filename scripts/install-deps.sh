@@ -8,6 +8,8 @@ packages=(
   libcli11-dev nlohmann-json3-dev libgtest-dev libbenchmark-dev
 )
 if [[ "${1:-}" == "--docs" ]]; then packages+=(python3 python3-matplotlib python3-numpy); fi
+# The libFuzzer harnesses (scripts/fuzz.sh) need clang and its runtime; the normal build does not.
+if [[ "${1:-}" == "--fuzz" ]]; then packages+=(clang libclang-rt-14-dev); fi
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

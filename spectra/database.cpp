@@ -4,12 +4,16 @@
 #include <cmath>
 #include <cctype>
 #include <charconv>
+#include <cerrno>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "core/errors.h"
+#include "core/memory_cap.h"
+#include "core/message.h"
 
 #ifndef FLUOROSIM_SPECTRA_DIR
 #define FLUOROSIM_SPECTRA_DIR "spectra/data"
@@ -87,11 +91,28 @@ std::string suggestion(const std::string& name, const std::vector<std::string>& 
     return s + "?)";
 }
 
+// Opens a spectrum file, telling a folder or an oversized file from a missing one. A table's rows
+// take about 40 bytes each in memory against at least 4 in the file.
+std::ifstream openSpectrumFile(const fs::path& file) {
+    std::error_code ec;
+    if (fs::is_directory(file, ec)) throw IoError(file.string() + ": is a folder, expected a CSV spectrum file");
+    // A device or pipe (/dev/zero) has no size to check and may never end.
+    if (fs::exists(file, ec) && !fs::is_regular_file(file, ec))
+        throw IoError(file.string() + ": not a regular file, expected a CSV spectrum file");
+    std::ifstream in(file, std::ios::binary);
+    if (!in) throw IoError(file.string() + ": cannot open spectrum file (" + std::strerror(errno) + ")");
+    const auto size = fs::file_size(file, ec);
+    if (!ec) requireMemory(10.0 * static_cast<double>(size), file.string() + ": reading a spectrum file of " + formatBytes(static_cast<double>(size)));
+    return in;
+}
+
 }  // namespace
 
 std::vector<std::string> closestNames(const std::string& name, const std::vector<std::string>& candidates, size_t count) {
     std::vector<std::pair<size_t, std::string>> scored;
-    for (const auto& c : candidates) scored.emplace_back(editDistance(aliasKey(name), aliasKey(c)), c);
+    // The edit distance costs length x length: a huge name is compared by its start only.
+    const std::string key = aliasKey(name.substr(0, 64));
+    for (const auto& c : candidates) scored.emplace_back(editDistance(key, aliasKey(c)), c);
     std::stable_sort(scored.begin(), scored.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     std::vector<std::string> out;
     for (size_t i = 0; i < scored.size() && i < count; ++i) out.push_back(scored[i].second);
@@ -99,14 +120,17 @@ std::vector<std::string> closestNames(const std::string& name, const std::vector
 }
 
 std::vector<TabulatedSpectrum> readSpectraCsv(const fs::path& file, const std::vector<std::string>& columns) {
-    std::ifstream in(file);
-    if (!in) throw IoError(file.string() + ": cannot open spectrum file");
+    std::ifstream in = openSpectrumFile(file);
+    return parseSpectraCsv(in, file.string(), columns);
+}
+
+std::vector<TabulatedSpectrum> parseSpectraCsv(std::istream& in, const std::string& file, const std::vector<std::string>& columns) {
     std::string line;
-    if (!std::getline(in, line)) throw ConfigError(file.string() + ": empty file, expected a header line");
+    if (!std::getline(in, line)) throw ConfigError(file + ": empty file, expected a header line");
     const auto header = splitCsv(line);
     auto columnIndex = [&](const std::string& name) {
         const auto it = std::find(header.begin(), header.end(), name);
-        if (it == header.end()) throw ConfigError(file.string() + ": missing column \"" + name + "\" in header \"" + trim(line) + "\"");
+        if (it == header.end()) throw ConfigError(file + ": missing column \"" + name + "\" in header \"" + excerpt(trim(line)) + "\"");
         return static_cast<size_t>(it - header.begin());
     };
     const size_t lambdaCol = columnIndex("wavelength_nm");
@@ -115,19 +139,19 @@ std::vector<TabulatedSpectrum> readSpectraCsv(const fs::path& file, const std::v
     std::vector<double> lambda;
     std::vector<std::vector<double>> values(columns.size());
     size_t row = 1;
-    auto where = [&](const std::string& col) { return file.string() + ":" + std::to_string(row) + ": column \"" + col + "\""; };
+    auto where = [&](const std::string& col) { return file + ":" + std::to_string(row) + ": column \"" + col + "\""; };
     while (std::getline(in, line)) {
         ++row;
         if (trim(line).empty() || trim(line)[0] == '#') continue;
         const auto cells = splitCsv(line);
         auto number = [&](size_t col, const std::string& colName) {
             if (col >= cells.size())
-                throw ConfigError(file.string() + ":" + std::to_string(row) + ": missing value in column \"" + colName + "\"");
+                throw ConfigError(file + ":" + std::to_string(row) + ": missing value in column \"" + colName + "\"");
             double v = 0;
             const std::string& cell = cells[col];
             const auto [ptr, ec] = std::from_chars(cell.data(), cell.data() + cell.size(), v);
             if (ec != std::errc() || ptr != cell.data() + cell.size())
-                throw ConfigError(file.string() + ":" + std::to_string(row) + ": column \"" + colName + "\" is not a number: \"" + cell + "\"");
+                throw ConfigError(file + ":" + std::to_string(row) + ": column \"" + colName + "\" is not a number: \"" + excerpt(cell) + "\"");
             return v;
         };
         const double l = number(lambdaCol, "wavelength_nm");
@@ -144,7 +168,7 @@ std::vector<TabulatedSpectrum> readSpectraCsv(const fs::path& file, const std::v
     }
     std::vector<TabulatedSpectrum> out;
     for (size_t i = 0; i < cols.size(); ++i)
-        out.emplace_back(lambda, values[i], file.string() + " column \"" + columns[i] + "\"");
+        out.emplace_back(lambda, values[i], file + " column \"" + columns[i] + "\"");
     return out;
 }
 
@@ -174,12 +198,12 @@ std::vector<std::string> Database::filterNames() const {
 
 TabulatedSpectrum Database::filter(const std::string& name) const {
     const fs::path file = dir_ / "filters" / (name + ".csv");
-    if (!fs::exists(file)) throw ConfigError("unknown filter \"" + name + "\"" + suggestion(name, filterNames()));
+    if (!fs::exists(file)) throw ConfigError("unknown filter \"" + excerpt(name) + "\"" + suggestion(name, filterNames()));
     return readSpectraCsv(file, {"transmission"})[0];
 }
 
 TabulatedSpectrum Database::solventAbsorption(const std::string& name) const {
-    if (lower(name) != "water") throw ConfigError("unknown solvent \"" + name + "\" (known: \"water\")");
+    if (lower(name) != "water") throw ConfigError("unknown solvent \"" + excerpt(name) + "\" (known: \"water\")");
     const auto core = readSpectraCsv(dir_ / "water/water_absorption_pope_fry_1997.csv", {"absorption_coefficient_per_m"})[0];
     const auto ext = readSpectraCsv(dir_ / "water/water_absorption_extension_unattributed.csv", {"absorption_coefficient_per_m"})[0];
     std::vector<std::pair<double, double>> rows;
@@ -223,7 +247,7 @@ DyeRecord Database::dye(const std::string& nameOrAlias) const {
         rec.emissionPeakNm = d.at("emission_peak_nm").get<double>();
         return rec;
     }
-    throw ConfigError("unknown dye \"" + nameOrAlias + "\"" + suggestion(nameOrAlias, ids));
+    throw ConfigError("unknown dye \"" + excerpt(nameOrAlias) + "\"" + suggestion(nameOrAlias, ids));
 }
 
 Fluorophore Database::fluorophore(const std::string& nameOrAlias, std::optional<double> extinctionPeak,
@@ -243,7 +267,7 @@ TabulatedSpectrum Database::resolve(const std::string& reference, const fs::path
     const std::string name = colon == std::string::npos ? reference : reference.substr(colon + 1);
     if (kind == "filter") return filter(name);
     if (kind == "illuminant") {
-        if (lower(name) != "d65") throw ConfigError("unknown illuminant \"" + name + "\" (known: \"D65\")");
+        if (lower(name) != "d65") throw ConfigError("unknown illuminant \"" + excerpt(name) + "\" (known: \"D65\")");
         return d65();
     }
     if (kind == "cie") {
@@ -251,23 +275,22 @@ TabulatedSpectrum Database::resolve(const std::string& reference, const fs::path
         if (name == "x") return cmf.x;
         if (name == "y") return cmf.y;
         if (name == "z") return cmf.z;
-        throw ConfigError("unknown CIE function \"" + name + "\" (known: x, y, z)");
+        throw ConfigError("unknown CIE function \"" + excerpt(name) + "\" (known: x, y, z)");
     }
     if (kind == "dye-excitation") return dye(name).excitation;
     if (kind == "dye-emission") return dye(name).emission;
     if (kind == "solvent-absorption") return solventAbsorption(name);
     if (!kind.empty())
-        throw ConfigError("unknown spectrum kind \"" + kind + "\" in \"" + reference +
+        throw ConfigError("unknown spectrum kind \"" + excerpt(kind) + "\" in \"" + excerpt(reference) +
                           "\" (known: filter, illuminant, cie, dye-excitation, dye-emission, solvent-absorption)");
     fs::path file = reference;
     if (file.is_relative() && !relativeTo.empty()) file = relativeTo / file;
-    std::ifstream in(file);
-    if (!in) throw IoError(file.string() + ": cannot open spectrum file");
+    std::ifstream in = openSpectrumFile(file);
     std::string header;
     std::getline(in, header);
     const auto cells = splitCsv(header);
     if (cells.size() != 2 || cells[0] != "wavelength_nm")
-        throw ConfigError(file.string() + ": expected a header \"wavelength_nm,<value>\", got \"" + trim(header) + "\"");
+        throw ConfigError(file.string() + ": expected a header \"wavelength_nm,<value>\", got \"" + excerpt(trim(header)) + "\"");
     return readSpectraCsv(file, {cells[1]})[0];
 }
 

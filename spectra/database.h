@@ -2,6 +2,7 @@
 // The spectral database: dyes, filters, solvents and CIE tables, loaded by name from CSV files in a
 // data folder (spectra/data, with SOURCES.md naming the origin of every file).
 #include <filesystem>
+#include <iosfwd>
 #include <optional>
 #include <string>
 #include <vector>
@@ -17,6 +18,8 @@ namespace fluorosim::spectra {
 // non-increasing wavelengths or negative values.
 std::vector<TabulatedSpectrum> readSpectraCsv(const std::filesystem::path& file,
                                               const std::vector<std::string>& columns);
+// The same on a stream; `source` names it in messages.
+std::vector<TabulatedSpectrum> parseSpectraCsv(std::istream& in, const std::string& source, const std::vector<std::string>& columns);
 
 struct DyeRecord {
     std::string id, name;

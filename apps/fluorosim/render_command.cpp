@@ -1,7 +1,5 @@
-#include <atomic>
 #include <chrono>
 #include <cmath>
-#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -10,13 +8,18 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cli_checks.h"
 #include "commands.h"
+#include "interruption.h"
 #include "core/errors.h"
+#include "core/memory_cap.h"
+#include "core/message.h"
 #include "database.h"
 #include "io/image_io.h"
 #include "output_checks.h"
 #include "progress.h"
 #include "scene_files.h"
+#include "render/checkpoint.h"
 #include "render/renderer.h"
 #include "scene/scene_loader.h"
 
@@ -24,8 +27,6 @@ namespace fluorosim::app {
 namespace fs = std::filesystem;
 namespace {
 
-std::atomic<bool> gCancel{false};
-extern "C" void onSignal(int) { gCancel.store(true); }
 
 struct RenderArgs {
     std::string scene, output;
@@ -35,7 +36,17 @@ struct RenderArgs {
     std::string fluorescence;
     double checkpointSeconds = 60;
     std::string preview = "total";  // which light the PNG shows: total, elastic or fluorescent
+    bool resume = false;            // continue from <output>.checkpoint
 };
+
+fs::path checkpointPath(const fs::path& out) { return out.string() + ".checkpoint"; }
+
+// The scene file's text, hashed so that --resume refuses a checkpoint of another scene.
+uint64_t sceneHash(const fs::path& file) {
+    std::ifstream in(file, std::ios::binary);
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    return fnv1a64(text.data(), text.size());
+}
 
 void checkWritable(const fs::path& out) {
     requireWritableFolder(out);  // now rather than after an hour of rendering
@@ -75,7 +86,9 @@ fs::path writeOutputs(const fs::path& out, const Film& film, const Scene& scene,
         if (l.prefix == preview) rgb = &l.rgb;
     ExrImage shown;
     shown.rgb = *rgb;
-    writePngPreview(png.string(), img.width, img.height, *rgb, autoExposure(shown));
+    const fs::path pngTmp = png.string() + ".partial";
+    writePngPreview(pngTmp.string(), img.width, img.height, *rgb, autoExposure(shown));
+    fs::rename(pngTmp, png);
     return png;
 }
 
@@ -88,41 +101,93 @@ void runRender(const RenderArgs& a) {
     const fs::path out = a.output;
     if (!(a.checkpointSeconds > 0)) throw ConfigError("--checkpoint-seconds: must be positive, got " + std::to_string(a.checkpointSeconds));
     checkWritable(out);
+    const fs::path ckptPath = checkpointPath(out);
+    std::error_code ec;
+    if (a.resume && !fs::exists(ckptPath, ec))
+        throw IoError(ckptPath.string() + ": no checkpoint to resume (it is written next to the output while a render runs; "
+                                          "run without --resume to start afresh)");
     const spectra::Database db;
     Scene scene = loadSceneFile(a.scene, db);
     for (const std::string& w : scene.warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
     if (a.seed) scene.render.seed = *a.seed;
     if (!a.fluorescence.empty()) {
         const auto model = fluorescenceModelFromName(a.fluorescence);
-        if (!model) throw ConfigError("--fluorescence: expected full, paper or none, got \"" + a.fluorescence + "\"");
+        if (!model) throw ConfigError("--fluorescence: expected full, paper or none, got \"" + excerpt(a.fluorescence) + "\"");
         scene.render.fluorescence = *model;
     }
-    RenderOptions opt;
-    opt.spp = a.spp.value_or(scene.render.spp);
-    opt.validate();
-    opt.threads = a.threads;
-    opt.seed = scene.render.seed;
-    // One sample per pixel per pass: Ctrl-C then waits at most one pass, and checkpoints stay fresh.
-    opt.sppPerPass = 1;
-    opt.cancel = &gCancel;
+    const int bins = Film::binCount(scene.spectral.lambdaMin, scene.spectral.lambdaMax, scene.spectral.binWidth);
+    requireMemory(Film::estimatedBytes(scene.camera.width, scene.camera.height, bins),
+                  a.scene + ": /camera/resolution " + std::to_string(scene.camera.width) + "x" + std::to_string(scene.camera.height) +
+                      " with " + std::to_string(bins) + " spectral bins (/spectral)");
     Film film(scene.camera.width, scene.camera.height, scene.spectral.lambdaMin, scene.spectral.lambdaMax, scene.spectral.binWidth, db.cie1931(),
               FluorescencePlan(scene).active());
+    RenderCheckpoint ckpt;
+    ckpt.sceneHash = sceneHash(a.scene);
+    ckpt.seed = scene.render.seed;
+    ckpt.fluorescence = fluorescenceModelName(scene.render.fluorescence);
+    RenderOptions opt;
+    if (a.resume) {
+        const RenderCheckpoint prior = readCheckpoint(ckptPath.string(), film);
+        if (prior.sceneHash != ckpt.sceneHash)
+            throw ConfigError(a.scene + ": differs from the scene that " + ckptPath.string() + " was rendered from");
+        if (prior.seed != ckpt.seed)
+            throw ConfigError("--seed: " + ckptPath.string() + " was rendered with seed " + std::to_string(prior.seed) + ", got " +
+                              std::to_string(ckpt.seed));
+        if (prior.fluorescence != ckpt.fluorescence)
+            throw ConfigError("--fluorescence: " + ckptPath.string() + " was rendered with \"" + prior.fluorescence + "\", got \"" +
+                              ckpt.fluorescence + "\"");
+        opt.firstSample = prior.sppDone;
+        ckpt.seconds = prior.seconds;
+        ckpt.stats = prior.stats;
+        opt.spp = a.spp.value_or(prior.sppTarget);
+        std::fprintf(stderr, "fluorosim: resuming %s at %d of %d spp\n", ckptPath.string().c_str(), prior.sppDone, opt.spp);
+    } else {
+        opt.spp = a.spp.value_or(scene.render.spp);
+        if (fs::exists(ckptPath, ec))
+            std::fprintf(stderr, "fluorosim: warning: %s is left from an interrupted render; this render replaces it (--resume continues it)\n",
+                         ckptPath.string().c_str());
+    }
+    ckpt.sppTarget = opt.spp;
+    opt.threads = a.threads;
+    opt.seed = scene.render.seed;
+    opt.validate();
+    // One sample per pixel per pass: checkpoints stay fresh, and a cancelled pass loses little.
+    opt.sppPerPass = 1;
     ProgressBar bar("render");
     opt.progress = [&](double f) { bar.update(f); };
     auto lastCheckpoint = std::chrono::steady_clock::now();
-    opt.passFinished = [&](const Film& f, int sppDone) {
+    const auto start = lastCheckpoint;
+    const RenderCheckpoint base = ckpt;
+    // The image and the checkpoint of the finished passes; `runStats` are this run's.
+    auto save = [&](const Film& f, int sppDone, const PathStats& runStats, const RenderSummary* summary) {
+        const fs::path png = writeOutputs(out, f, scene, sppDone, summary, a.preview);
+        RenderCheckpoint c = base;
+        c.sppDone = sppDone;
+        c.seconds = base.seconds + std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        c.stats.add(runStats);
+        writeCheckpoint(ckptPath.string(), c, f);
+        return png;
+    };
+    opt.passFinished = [&](const Film& f, int sppDone, const PathStats& runStats) {
         const auto now = std::chrono::steady_clock::now();
         if (sppDone < opt.spp && std::chrono::duration<double>(now - lastCheckpoint).count() > a.checkpointSeconds) {
-            writeOutputs(out, f, scene, sppDone, nullptr, a.preview);
+            save(f, sppDone, runStats, nullptr);
             lastCheckpoint = now;
         }
     };
-    std::signal(SIGINT, onSignal);
-    std::signal(SIGTERM, onSignal);
-    const RenderSummary s = render(scene, film, opt);
+    opt.cancel = &installInterruptHandlers();
+    RenderSummary s = render(scene, film, opt);
     bar.finish();
     if (s.sppCompleted == 0) throw Error("interrupted before the first pass finished; nothing written");
-    const fs::path png = writeOutputs(out, film, scene, s.sppCompleted, &s, a.preview);
+    fs::path png;
+    if (s.cancelled) {
+        png = save(film, s.sppCompleted, s.stats, &s);
+    } else {
+        png = writeOutputs(out, film, scene, s.sppCompleted, &s, a.preview);
+        fs::remove(ckptPath, ec);
+    }
+    s.stats.add(base.stats);
+    s.seconds += base.seconds;
     const double bounces = static_cast<double>(s.stats.scatteringEvents + s.stats.surfaceBounces) / std::max<double>(1.0, static_cast<double>(s.stats.paths));
     const nlohmann::json summary = {{"image", out.string()},
                                     {"preview", png.string()},
@@ -158,10 +223,12 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_option("-o,--output", args->output, "Output .exr (a .png preview is written next to it)")->required();
     cmd->add_option("--spp", args->spp, "Samples per pixel (default: the scene's)");
     cmd->add_option("--threads", args->threads, "Threads (0 = all cores)");
-    cmd->add_option("--seed", args->seed, "Random seed (default: the scene's)");
+    cmd->add_option("--seed", args->seed, "Random seed (default: the scene's)")->check(nonNegativeInteger());
     cmd->add_option("--fluorescence", args->fluorescence,
                     "Fluorescence model: full (unbiased, default), paper (Abdellah et al.: one event, direct light) or none");
     cmd->add_option("--checkpoint-seconds", args->checkpointSeconds, "Write the image every this many seconds");
+    cmd->add_flag("--resume", args->resume,
+                  "Continue an interrupted render from OUTPUT.checkpoint (same scene, seed and model; --spp may raise the target)");
     cmd->add_option("--preview", args->preview,
                     "What the PNG preview shows: total (default), elastic or fluorescent (the EXR always has all three)")
         ->check(CLI::IsMember({"total", "elastic", "fluorescent"}));

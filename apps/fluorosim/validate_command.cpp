@@ -1,7 +1,9 @@
 #include <cstdio>
 #include <memory>
 #include <optional>
+#include <sstream>
 
+#include "cli_checks.h"
 #include "commands.h"
 #include "core/errors.h"
 #include "core/units.h"
@@ -58,8 +60,11 @@ void runSlab(const SlabArgs& a) {
     o.n = index(a.n, "n");
     o.nAbove = index(a.nAbove, "n-above");
     o.nBelow = index(a.nBelow, "n-below");
-    if (!(a.photons >= 2 && a.photons <= 1.1e12))
-        throw ConfigError("--photons: must lie in [2, 1.1e12], got " + std::to_string(a.photons));
+    if (!(a.photons >= 2 && a.photons <= 1.1e12)) {
+        std::ostringstream os;
+        os << "--photons: must lie in [2, 1.1e12], got " << a.photons;
+        throw ConfigError(os.str());
+    }
     o.photons = static_cast<uint64_t>(a.photons);
     o.seed = a.seed;
     o.threads = a.threads;
@@ -104,7 +109,7 @@ void addValidateCommands(CLI::App& app) {
     slab->add_option("--g-emission", a->gEm, "Emission band: anisotropy (default: --g)");
     slab->add_option("--mua-dye-emission", a->muaDyeEm, "Emission band: dye re-absorption (default: --mua-dye)");
     slab->add_option("--photons", a->photons, "Number of photons (e.g. 1e6)");
-    slab->add_option("--seed", a->seed, "Random seed");
+    slab->add_option("--seed", a->seed, "Random seed")->check(nonNegativeInteger());
     slab->add_option("--threads", a->threads, "Threads (0 = all cores)");
     slab->add_flag("--quiet", a->quiet, "No progress bar");
     slab->callback([a] { runSlab(*a); });

@@ -7,11 +7,16 @@
 #include <cstdio>
 #include <fstream>
 #include <memory>
+#include <sstream>
 
 #include <nlohmann/json.hpp>
 
+#include "cli_checks.h"
 #include "commands.h"
+#include "output_checks.h"
 #include "core/errors.h"
+#include "core/message.h"
+#include "core/parallel.h"
 #include "core/units.h"
 #include "database.h"
 #include "progress.h"
@@ -38,12 +43,19 @@ struct DyedBall {
     double sigmaS;
 };
 
+std::string numberText(double v) {
+    std::ostringstream os;
+    os << v;
+    return os.str();
+}
+
 DyedBall parseBall(const BallArgs& a, const spectra::Database& db) {
+    checkThreadCount(a.threads, "--threads");
     const Fluorophore dye = db.fluorophore(a.dye);
     const double c = parseQuantity(a.concentration, Dimension::MolarConcentration, "--concentration");
-    if (!(c >= 0) || c > 10) throw ConfigError("--concentration: must lie in [0, 10 M], got \"" + a.concentration + "\"");
+    if (!(c >= 0) || c > 10) throw ConfigError("--concentration: must lie in [0, 10 M], got \"" + excerpt(a.concentration) + "\"");
     const double s = parseQuantity(a.sigmaS, Dimension::InverseLength, "--sigma-s");
-    if (!(s >= 0) || s > 1e5) throw ConfigError("--sigma-s: must lie in [0, 1e5 /mm], got \"" + a.sigmaS + "\"");
+    if (!(s >= 0) || s > 1e5) throw ConfigError("--sigma-s: must lie in [0, 1e5 /mm], got \"" + excerpt(a.sigmaS) + "\"");
     return {dye, c, s};
 }
 
@@ -105,10 +117,12 @@ struct EmissionArgs : BallArgs {
 };
 
 void runEmission(const EmissionArgs& a) {
+    requireWritableFolder(a.output);  // before minutes of rendering
     const spectra::Database db;
     const DyedBall b = parseBall(a, db);
-    if (!(a.excitation >= 200 && a.excitation <= 1200)) throw ConfigError("--excitation: must lie in [200, 1200] nm");
-    if (a.spp < 1 || a.spp > 1 << 20) throw ConfigError("--spp: must lie in [1, 1048576]");
+    if (!(a.excitation >= 200 && a.excitation <= 1200))
+        throw ConfigError("--excitation: must lie in [200, 1200] nm, got " + numberText(a.excitation));
+    if (a.spp < 1 || a.spp > 1 << 20) throw ConfigError("--spp: must lie in [1, 1048576], got " + std::to_string(a.spp));
     const auto [emLo, emHi] = b.dye.emissionSupport();
     const double lo = std::floor(std::min(a.excitation - 1, emLo)), hi = std::ceil(std::max(a.excitation + 1, emHi));
     const Scene scene = ballScene(b, a.excitation, 1.0, lo, hi);
@@ -171,11 +185,13 @@ struct SweepArgs : BallArgs {
 };
 
 void runSweep(const SweepArgs& a) {
+    requireWritableFolder(a.output);  // before minutes of simulation
     const spectra::Database db;
     const DyedBall b = parseBall(a, db);
     if (!(a.from >= 200 && a.to <= 1200 && a.from <= a.to && a.step > 0) || (a.to - a.from) / a.step > 1000)
-        throw ConfigError("--from/--to/--step: need 200 <= from <= to <= 1200 nm, step > 0 and at most 1000 steps");
-    if (!(a.paths >= 100 && a.paths <= 1e9)) throw ConfigError("--paths: must lie in [100, 1e9]");
+        throw ConfigError("--from/--to/--step: need 200 <= from <= to <= 1200 nm, step > 0 and at most 1000 steps, got " +
+                          numberText(a.from) + ", " + numberText(a.to) + ", " + numberText(a.step));
+    if (!(a.paths >= 100 && a.paths <= 1e9)) throw ConfigError("--paths: must lie in [100, 1e9], got " + numberText(a.paths));
     const auto [emLo, emHi] = b.dye.emissionSupport();
     // The peak: where the dye's excitation spectrum (peak 1) is largest, on a 1 nm grid.
     double peak = a.from, best = -1;
@@ -251,7 +267,7 @@ void addBallOptions(CLI::App* cmd, BallArgs* a) {
     cmd->add_option("--sigma-s", a->sigmaS, "Scattering coefficient of the solvent (e.g. 10/mm)");
     cmd->add_option("-o,--output", a->output, "Output JSON")->required();
     cmd->add_option("--threads", a->threads, "Threads (0 = all cores)");
-    cmd->add_option("--seed", a->seed, "Random seed");
+    cmd->add_option("--seed", a->seed, "Random seed")->check(nonNegativeInteger());
 }
 
 }  // namespace

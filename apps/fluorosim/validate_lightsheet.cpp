@@ -6,10 +6,12 @@
 #include <cstdio>
 #include <fstream>
 #include <memory>
+#include <sstream>
 #include <nlohmann/json.hpp>
 
 #include "commands.h"
 #include "core/errors.h"
+#include "core/message.h"
 #include "core/rng.h"
 #include "core/units.h"
 #include "core/math.h"
@@ -121,15 +123,20 @@ void runScatteringDepth(const SheetArgs& a, double sigmaS) {
 }
 
 void runLightSheet(const SheetArgs& a) {
-    if (!(a.wavelength >= 300 && a.wavelength <= 1100)) throw ConfigError("--wavelength: must lie in [300, 1100] nm");
-    if (!(a.waistUm > 0.1 && a.waistUm < 1000)) throw ConfigError("--waist: must lie in (0.1, 1000) um");
-    if (!(a.n >= 1 && a.n < 3)) throw ConfigError("--n: must lie in [1, 3)");
-    if (a.positions < 3 || a.positions > 101) throw ConfigError("--positions: must lie in [3, 101]");
+    auto got = [](double v) {
+        std::ostringstream os;
+        os << ", got " << v;
+        return os.str();
+    };
+    if (!(a.wavelength >= 300 && a.wavelength <= 1100)) throw ConfigError("--wavelength: must lie in [300, 1100] nm" + got(a.wavelength));
+    if (!(a.waistUm > 0.1 && a.waistUm < 1000)) throw ConfigError("--waist: must lie in (0.1, 1000) um" + got(a.waistUm));
+    if (!(a.n >= 1 && a.n < 3)) throw ConfigError("--n: must lie in [1, 3)" + got(a.n));
+    if (a.positions < 3 || a.positions > 101) throw ConfigError("--positions: must lie in [3, 101]" + got(a.positions));
     requireWritableFolder(a.output);  // before a scattering run of minutes
-    if (a.samples < 1 || a.samples > 1000000) throw ConfigError("--samples: must lie in [1, 1e6]");
+    if (a.samples < 1 || a.samples > 1000000) throw ConfigError("--samples: must lie in [1, 1e6]" + got(a.samples));
     const double sigmaS = parseQuantity(a.sigmaS, Dimension::InverseLength, "--sigma-s");
-    if (!(sigmaS >= 0) || sigmaS > 1e4) throw ConfigError("--sigma-s: must lie in [0, 1e4 /mm], got \"" + a.sigmaS + "\"");
-    if (!(a.g > -1 && a.g < 1)) throw ConfigError("--g: must lie in (-1, 1)");
+    if (!(sigmaS >= 0) || sigmaS > 1e4) throw ConfigError("--sigma-s: must lie in [0, 1e4 /mm], got \"" + excerpt(a.sigmaS) + "\"");
+    if (!(a.g > -1 && a.g < 1)) throw ConfigError("--g: must lie in (-1, 1)" + got(a.g));
     if (sigmaS > 0) return runScatteringDepth(a, sigmaS);
     const spectra::Database db;
     const double w0 = a.waistUm * 1e-3;

@@ -11,6 +11,7 @@
 
 #include "commands.h"
 #include "core/errors.h"
+#include "core/parallel.h"
 #include "core/units.h"
 #include "database.h"
 #include "morphology/swc.h"
@@ -89,6 +90,7 @@ void runVoxelize(const VoxelizeArgs& a) {
         opt.membraneThicknessMm = positiveLength(*a.membraneThickness, "--membrane-thickness");
     }
     opt.supersampling = a.supersampling;
+    checkThreadCount(a.threads, "--threads");
     opt.threads = a.threads;
     opt.validate();
     checkCount(a.dyes, files, "--dye");

@@ -5,11 +5,22 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include <string>
+
+#include "core/errors.h"
+
 namespace fluorosim {
 
 int defaultThreadCount() { return tbb::info::default_concurrency(); }
 
+void checkThreadCount(int threads, std::string_view option) {
+    if (threads < 0 || threads > kMaxThreads)
+        throw ConfigError(std::string(option) + ": must lie in [0, " + std::to_string(kMaxThreads) + "] (0 = all cores), got " +
+                          std::to_string(threads));
+}
+
 void parallelFor(size_t count, int threads, const std::function<void(size_t)>& body) {
+    checkThreadCount(threads, "threads");
     if (threads <= 0) threads = defaultThreadCount();
     if (threads == 1) {
         for (size_t i = 0; i < count; ++i) body(i);

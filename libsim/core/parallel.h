@@ -3,10 +3,16 @@
 // keying random streams on the item index and reducing per-item results in index order.
 #include <cstddef>
 #include <functional>
+#include <string_view>
 
 namespace fluorosim {
 
-// Runs body(i) for i in [0, count) on `threads` threads (0 = all cores).
+// Thread counts are 0 (all cores) to kMaxThreads; TBB crashes on absurd arena sizes (65537).
+inline constexpr int kMaxThreads = 4096;
+// Throws ConfigError "<option>: must lie in [0, 4096] (0 = all cores), got N" outside that range.
+void checkThreadCount(int threads, std::string_view option);
+
+// Runs body(i) for i in [0, count) on `threads` threads (0 = all cores); checks `threads` first.
 void parallelFor(size_t count, int threads, const std::function<void(size_t)>& body);
 
 int defaultThreadCount();

@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "core/errors.h"
+#include "core/message.h"
 
 namespace fluorosim {
 namespace {
@@ -86,7 +87,7 @@ double parseQuantity(std::string_view text, Dimension dim, std::string_view what
                      std::optional<std::string_view> bareUnit) {
     const std::string_view s = trim(text);
     auto fail = [&](const std::string& why) -> double {
-        throw ConfigError(std::string(what) + ": " + why + " (got \"" + std::string(text) + "\", expected " +
+        throw ConfigError(std::string(what) + ": " + why + " (got \"" + excerpt(text) + "\", expected " +
                           dimensionName(dim) + ")");
     };
     double value = 0;
@@ -95,19 +96,25 @@ double parseQuantity(std::string_view text, Dimension dim, std::string_view what
     // from_chars rejects a leading '+', accept it for convenience.
     if (begin != end && *begin == '+') ++begin;
     const auto [ptr, ec] = std::from_chars(begin, end, value);
+    if (ec == std::errc::result_out_of_range) return fail("beyond the range of double precision");
     if (ec != std::errc() || ptr == begin) return fail("not a number");
     if (!std::isfinite(value)) return fail("not finite");
     const std::string_view unit = trim(std::string_view(ptr, static_cast<size_t>(end - ptr)));
+    // The product is checked too: "1e308 m" is finite in metres but not in millimetres.
+    auto scaled = [&](double scale) {
+        const double v = value * scale;
+        return std::isfinite(v) ? v : fail("too large: not finite in internal units");
+    };
     if (unit.empty()) {
         if (dim == Dimension::Dimensionless) return value;
         if (!bareUnit) return fail("missing unit");
         const auto scale = unitScale(*bareUnit, dim);
         if (!scale) return fail("the default unit \"" + std::string(*bareUnit) + "\" does not fit");
-        return value * *scale;
+        return scaled(*scale);
     }
     const auto scale = unitScale(unit, dim);
-    if (!scale) return fail("unknown or mismatched unit \"" + std::string(unit) + "\"");
-    return value * *scale;
+    if (!scale) return fail("unknown or mismatched unit \"" + excerpt(unit) + "\"");
+    return scaled(*scale);
 }
 
 }  // namespace fluorosim

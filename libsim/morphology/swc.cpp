@@ -12,6 +12,8 @@
 #include <unordered_map>
 
 #include "core/errors.h"
+#include "core/memory_cap.h"
+#include "core/message.h"
 
 namespace fluorosim {
 namespace {
@@ -42,7 +44,7 @@ public:
         throw ConfigError(source_ + ":" + std::to_string(line_) + ": " + what);
     }
     [[noreturn]] void failField(const char* field, std::string_view value, const std::string& why) const {
-        fail(std::string("field \"") + field + "\": " + why + " (got \"" + std::string(value) + "\")");
+        fail(std::string("field \"") + field + "\": " + why + " (got \"" + excerpt(value) + "\")");
     }
 
     int integer(std::string_view text, const char* field) const {
@@ -135,7 +137,7 @@ Morphology parseSwc(std::string_view text, const std::string& source) {
         const LineParser p(source, lineNo);
         const auto f = splitFields(line);
         if (f.size() != 7)
-            p.fail("expected 7 fields \"id type x y z radius parent\", got " + std::to_string(f.size()) + " (\"" + std::string(line) + "\")");
+            p.fail("expected 7 fields \"id type x y z radius parent\", got " + std::to_string(f.size()) + " (\"" + excerpt(line) + "\")");
         SwcSample s;
         s.line = lineNo;
         s.id = p.integer(f[0], "id");
@@ -159,8 +161,13 @@ Morphology readSwc(const std::string& path) {
     namespace fs = std::filesystem;
     std::error_code ec;
     if (fs::is_directory(path, ec)) throw IoError(path + ": is a folder, expected an SWC file");
+    // A device or pipe (/dev/zero) has no size to check and may never end.
+    if (fs::exists(path, ec) && !fs::is_regular_file(path, ec)) throw IoError(path + ": not a regular file, expected an SWC file");
     std::ifstream in(path, std::ios::binary);
     if (!in) throw IoError(path + ": cannot open SWC file (" + std::strerror(errno) + ")");
+    // The text, the samples (56 bytes for a line of at least 14) and the tree check's index.
+    const auto size = fs::file_size(path, ec);
+    if (!ec) requireMemory(10.0 * static_cast<double>(size), path + ": reading an SWC file of " + formatBytes(static_cast<double>(size)));
     std::ostringstream ss;
     ss << in.rdbuf();
     if (in.bad()) throw IoError(path + ": cannot read SWC file");

@@ -4,9 +4,12 @@
 #include <cmath>
 #include <numeric>
 #include <array>
+#include <istream>
+#include <ostream>
 #include <string>
 
 #include "core/errors.h"
+#include "core/memory_cap.h"
 
 namespace fluorosim {
 
@@ -18,7 +21,9 @@ Film::Film(int width, int height, double lambdaMin, double lambdaMax, double bin
                           std::to_string(height));
     if (!(binWidth > 0) || (lambdaMax - lambdaMin) / binWidth > 4000)
         throw ConfigError("spectral bin width must be positive and give at most 4000 bins, got " + std::to_string(binWidth) + " nm");
-    const int bins = std::max(1, static_cast<int>(std::ceil((lambdaMax - lambdaMin) / binWidth - 1e-9)));
+    const int bins = binCount(lambdaMin, lambdaMax, binWidth);
+    requireMemory(estimatedBytes(width, height, bins),
+                  "film of " + std::to_string(width) + "x" + std::to_string(height) + " pixels with " + std::to_string(bins) + " spectral bins");
     // The last bin ends at lambdaMax even when the range is not a multiple of the bin width.
     for (int b = 0; b < bins; ++b) {
         const double lo = lambdaMin + b * binWidth, hi = std::min(lambdaMax, lo + binWidth);
@@ -35,31 +40,123 @@ Film::Film(int width, int height, double lambdaMin, double lambdaMax, double bin
     nonFinite_.assign(pixels, 0);
 }
 
+int Film::binCount(double lambdaMin, double lambdaMax, double binWidth) {
+    return std::max(1, static_cast<int>(std::ceil((lambdaMax - lambdaMin) / binWidth - 1e-9)));
+}
+
+double Film::estimatedBytes(int width, int height, int bins) {
+    const double pixels = static_cast<double>(width) * static_cast<double>(height);
+    const double perPixelAndChannel = 2 * 8    // elastic and fluorescent sums, double
+                                      + 2 * 8  // the staged copy of a pass's rows
+                                      + 3 * 4;  // total, elastic and fluorescent layers as floats in the EXR image
+    return pixels * ((3.0 + bins) * perPixelAndChannel + 2 * 4);  // + non-finite counts (film and staged)
+}
+
 void Film::addSample(int x, int y, const PathRadiance& L, const SampledWavelengths& wl) {
     const size_t pixel = static_cast<size_t>(y) * static_cast<size_t>(width_) + static_cast<size_t>(x);
     if (!L.elastic.isFinite() || !L.fluorescent.isFinite()) {
         ++nonFinite_[pixel];
         return;
     }
-    accumulate(pixel, kElastic, L.elastic, wl);
-    accumulate(pixel, kFluorescent, L.fluorescent, wl);
+    const size_t bins = static_cast<size_t>(binCount());
+    for (int c = 0; c < 2; ++c)
+        accumulate(&xyz_[c][3 * pixel], &spectral_[c][pixel * bins], c == kElastic ? L.elastic : L.fluorescent, wl);
 }
 
-void Film::accumulate(size_t pixel, Component component, const SampledSpectrum& L, const SampledWavelengths& wl) {
+void Film::addSample(Row& row, int x, const PathRadiance& L, const SampledWavelengths& wl) const {
+    const size_t px = static_cast<size_t>(x);
+    if (!L.elastic.isFinite() || !L.fluorescent.isFinite()) {
+        ++row.nonFinite[px];
+        return;
+    }
+    const size_t bins = static_cast<size_t>(binCount());
+    for (int c = 0; c < 2; ++c)
+        accumulate(&row.xyz[c][3 * px], &row.spectral[c][px * bins], c == kElastic ? L.elastic : L.fluorescent, wl);
+}
+
+// One pixel of one component: `xyz` holds its 3 sums, `spectral` its bins.
+void Film::accumulate(double* xyz, double* spectral, const SampledSpectrum& L, const SampledWavelengths& wl) const {
     const int bins = binCount();
-    std::vector<double>& xyz = xyz_[component];
-    std::vector<double>& spectral = spectral_[component];
     for (int i = 0; i < kNumWavelengths; ++i) {
         if (wl.pdf[i] == 0 || L[i] == 0) continue;
         const double c = L[i] / wl.pdf[i] / kNumWavelengths;
         const double l = wl.lambda[i];
-        xyz[3 * pixel + 0] += c * cmf_.x(l) / yIntegral_;
-        xyz[3 * pixel + 1] += c * cmf_.y(l) / yIntegral_;
-        xyz[3 * pixel + 2] += c * cmf_.z(l) / yIntegral_;
+        xyz[0] += c * cmf_.x(l) / yIntegral_;
+        xyz[1] += c * cmf_.y(l) / yIntegral_;
+        xyz[2] += c * cmf_.z(l) / yIntegral_;
         // A line exactly at the range maximum belongs to the last bin.
         const int b = std::min(bins - 1, static_cast<int>(std::floor((l - lambdaMin_) / binWidth_)));
-        if (b >= 0 && b < bins) spectral[pixel * static_cast<size_t>(bins) + static_cast<size_t>(b)] += c / binWidths_[static_cast<size_t>(b)];
+        if (b >= 0 && b < bins) spectral[b] += c / binWidths_[static_cast<size_t>(b)];
     }
+}
+
+Film::Row Film::row(int y) const {
+    Row r;
+    r.y = y;
+    const size_t w = static_cast<size_t>(width_), bins = static_cast<size_t>(binCount()), first = static_cast<size_t>(y) * w;
+    for (int c = 0; c < 2; ++c) {
+        r.xyz[c].assign(xyz_[c].begin() + static_cast<std::ptrdiff_t>(3 * first), xyz_[c].begin() + static_cast<std::ptrdiff_t>(3 * (first + w)));
+        r.spectral[c].assign(spectral_[c].begin() + static_cast<std::ptrdiff_t>(bins * first),
+                             spectral_[c].begin() + static_cast<std::ptrdiff_t>(bins * (first + w)));
+    }
+    r.nonFinite.assign(nonFinite_.begin() + static_cast<std::ptrdiff_t>(first), nonFinite_.begin() + static_cast<std::ptrdiff_t>(first + w));
+    return r;
+}
+
+void Film::commit(const Row& r) {
+    const size_t w = static_cast<size_t>(width_), bins = static_cast<size_t>(binCount()), first = static_cast<size_t>(r.y) * w;
+    for (int c = 0; c < 2; ++c) {
+        std::copy(r.xyz[c].begin(), r.xyz[c].end(), xyz_[c].begin() + static_cast<std::ptrdiff_t>(3 * first));
+        std::copy(r.spectral[c].begin(), r.spectral[c].end(), spectral_[c].begin() + static_cast<std::ptrdiff_t>(bins * first));
+    }
+    std::copy(r.nonFinite.begin(), r.nonFinite.end(), nonFinite_.begin() + static_cast<std::ptrdiff_t>(first));
+}
+
+namespace {
+
+template <class T>
+void writeArray(std::ostream& out, const std::vector<T>& v) {
+    const uint64_t n = v.size();
+    out.write(reinterpret_cast<const char*>(&n), sizeof n);
+    out.write(reinterpret_cast<const char*>(v.data()), static_cast<std::streamsize>(n * sizeof(T)));
+}
+
+template <class T>
+void readArray(std::istream& in, std::vector<T>& v, const char* what) {
+    uint64_t n = 0;
+    in.read(reinterpret_cast<char*>(&n), sizeof n);
+    if (!in) throw IoError(std::string("film state: truncated before ") + what);
+    if (n != v.size())
+        throw ConfigError(std::string("film state: ") + what + " holds " + std::to_string(n) + " values, this film " + std::to_string(v.size()));
+    in.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(n * sizeof(T)));
+    if (!in) throw IoError(std::string("film state: truncated in ") + what);
+}
+
+}  // namespace
+
+void Film::writeState(std::ostream& out) const {
+    const int32_t dims[4] = {width_, height_, binCount(), separate_ ? 1 : 0};
+    out.write(reinterpret_cast<const char*>(dims), sizeof dims);
+    for (int c = 0; c < 2; ++c) {
+        writeArray(out, xyz_[c]);
+        writeArray(out, spectral_[c]);
+    }
+    writeArray(out, nonFinite_);
+}
+
+void Film::readState(std::istream& in) {
+    int32_t dims[4] = {};
+    in.read(reinterpret_cast<char*>(dims), sizeof dims);
+    if (!in) throw IoError("film state: truncated");
+    if (dims[0] != width_ || dims[1] != height_ || dims[2] != binCount() || dims[3] != (separate_ ? 1 : 0))
+        throw ConfigError("film state: " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + " pixels, " + std::to_string(dims[2]) +
+                          " bins" + (dims[3] ? " with" : " without") + " fluorescent layers; this render has " + std::to_string(width_) + "x" +
+                          std::to_string(height_) + ", " + std::to_string(binCount()) + (separate_ ? " with" : " without"));
+    for (int c = 0; c < 2; ++c) {
+        readArray(in, xyz_[c], "XYZ sums");
+        readArray(in, spectral_[c], "spectral sums");
+    }
+    readArray(in, nonFinite_, "non-finite counts");
 }
 
 ExrImage Film::image(int spp) const {

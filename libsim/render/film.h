@@ -5,6 +5,7 @@
 // `separateComponents` the image also carries them as "elastic" and "fluorescent" layers.
 #include <array>
 #include <cstdint>
+#include <iosfwd>
 #include <vector>
 
 #include "io/image_io.h"
@@ -16,8 +17,14 @@ namespace fluorosim {
 
 class Film {
 public:
+    // Throws ConfigError for a bad size, or one whose memory (estimatedBytes) exceeds the memory cap.
     Film(int width, int height, double lambdaMin, double lambdaMax, double binWidth, ColorMatchingFunctions cmf,
          bool separateComponents = false);
+    // Spectral bins for a range and bin width: the last bin ends at lambdaMax.
+    static int binCount(double lambdaMin, double lambdaMax, double binWidth);
+    // Memory a render holds for a film of this size: the accumulators, the copy of the rows of a pass in
+    // progress (render() stages them), and the float image written out; about 44 bytes per pixel and bin.
+    static double estimatedBytes(int width, int height, int bins);
     int width() const { return width_; }
     int height() const { return height_; }
     int binCount() const { return static_cast<int>(binCenters_.size()); }
@@ -31,9 +38,26 @@ public:
     uint64_t nonFiniteSamples() const;
     double meanLuminance(int samplesPerPixel) const;
 
+    // A copy of one row's accumulators. render() adds a pass's samples to copies and commits them when
+    // the whole pass is done, so a pass cancelled half way leaves the film at its last finished pass.
+    // The sums are formed in the same order as with addSample(x, y, ...), so results are bit-identical.
+    struct Row {
+        int y = -1;
+        std::array<std::vector<double>, 2> xyz, spectral;
+        std::vector<uint32_t> nonFinite;
+    };
+    Row row(int y) const;
+    void addSample(Row& row, int x, const PathRadiance& L, const SampledWavelengths& wl) const;
+    void commit(const Row& row);
+
+    // The accumulators, bit for bit, for render checkpoints (render/checkpoint.h). readState throws
+    // IoError for a short stream and ConfigError for a state of another size.
+    void writeState(std::ostream& out) const;
+    void readState(std::istream& in);
+
 private:
     enum Component { kElastic = 0, kFluorescent = 1 };
-    void accumulate(size_t pixel, Component c, const SampledSpectrum& L, const SampledWavelengths& wl);
+    void accumulate(double* xyz, double* spectral, const SampledSpectrum& L, const SampledWavelengths& wl) const;
 
     int width_, height_;
     double lambdaMin_, binWidth_;

@@ -1,5 +1,6 @@
 #include "render/renderer.h"
 
+#include <algorithm>
 #include <chrono>
 #include <mutex>
 #include <string>
@@ -12,8 +13,11 @@ namespace fluorosim {
 
 void RenderOptions::validate() const {
     if (spp <= 0 || spp > (1 << 24)) throw ConfigError("--spp: must lie in [1, 16777216], got " + std::to_string(spp));
-    if (threads < 0 || threads > 4096) throw ConfigError("--threads: must lie in [0, 4096], got " + std::to_string(threads));
+    checkThreadCount(threads, "--threads");
     if (sppPerPass <= 0) throw ConfigError("spp per pass must be positive, got " + std::to_string(sppPerPass));
+    if (firstSample < 0 || firstSample > spp)
+        throw ConfigError("--spp: must be at least the " + std::to_string(firstSample) + " samples per pixel already rendered, got " +
+                          std::to_string(spp));
 }
 
 Ray cameraRay(const Camera& camera, int x, int y, double u1, double u2) {
@@ -32,37 +36,59 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
     const Camera& cam = scene.camera;
     const int rows = cam.height;
     RenderSummary summary;
+    summary.sppCompleted = options.firstSample;
     std::vector<PathStats> rowStats(static_cast<size_t>(rows));
     std::mutex progressMutex;
-    const double totalWork = static_cast<double>(options.spp) * rows;
+    const double totalWork = static_cast<double>(options.spp - options.firstSample) * rows;
     double workDone = 0;
+    auto cancelled = [&] { return options.cancel && options.cancel->load(std::memory_order_relaxed); };
 
-    for (int passStart = 0; passStart < options.spp; passStart += options.sppPerPass) {
-        if (options.cancel && options.cancel->load()) {
+    for (int passStart = options.firstSample; passStart < options.spp; passStart += options.sppPerPass) {
+        if (cancelled()) {
             summary.cancelled = true;
             break;
         }
         const int passEnd = std::min(options.spp, passStart + options.sppPerPass);
+        // Each row of the pass is traced into a copy and committed only when every row is done.
+        std::vector<Film::Row> staged(static_cast<size_t>(rows));
+        std::vector<PathStats> stagedStats(static_cast<size_t>(rows));
+        std::vector<char> done(static_cast<size_t>(rows), 0);
         parallelFor(static_cast<size_t>(rows), options.threads, [&](size_t row) {
+            if (cancelled()) return;
             const int y = static_cast<int>(row);
-            PathStats& stats = rowStats[row];
+            Film::Row r = film.row(y);
+            PathStats stats = rowStats[row];
             for (int x = 0; x < cam.width; ++x) {
+                if (cancelled()) return;
                 const uint64_t pixel = static_cast<uint64_t>(y) * static_cast<uint64_t>(cam.width) + static_cast<uint64_t>(x);
                 for (int s = passStart; s < passEnd; ++s) {
                     Rng rng = Rng::forKey(options.seed, pixel, static_cast<uint64_t>(s));
                     const SampledWavelengths wl = wavelengths.sample(rng.uniform(), rng.uniform());
                     const Ray ray = cameraRay(cam, x, y, rng.uniform(), rng.uniform());
-                    film.addSample(x, y, tracer.radiance(ray, cam.medium, wl, rng, stats), wl);
+                    film.addSample(r, x, tracer.radiance(ray, cam.medium, wl, rng, stats), wl);
                 }
             }
+            staged[row] = std::move(r);
+            stagedStats[row] = stats;
+            done[row] = 1;
             if (options.progress) {
                 std::lock_guard<std::mutex> lock(progressMutex);
                 workDone += passEnd - passStart;
                 options.progress(workDone / totalWork);
             }
         });
+        if (std::find(done.begin(), done.end(), 0) != done.end()) {
+            summary.cancelled = true;  // the pass was abandoned: the film keeps the passes before it
+            break;
+        }
+        for (int y = 0; y < rows; ++y) film.commit(staged[static_cast<size_t>(y)]);
+        rowStats = std::move(stagedStats);
         summary.sppCompleted = passEnd;
-        if (options.passFinished) options.passFinished(film, passEnd);
+        if (options.passFinished) {
+            PathStats stats;
+            for (const PathStats& st : rowStats) stats.add(st);
+            options.passFinished(film, passEnd, stats);
+        }
     }
     for (const PathStats& s : rowStats) summary.stats.add(s);
     summary.nonFiniteSamples = film.nonFiniteSamples();

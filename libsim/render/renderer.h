@@ -1,7 +1,7 @@
 #pragma once
 // Drives the path tracer over the image in passes. Random streams are keyed on (seed, pixel,
-// sample index), so the image does not depend on the thread count, and a cancelled run keeps every
-// finished pass.
+// sample index), so the image does not depend on the thread count or on where a run was
+// interrupted and resumed, and a cancelled run keeps every finished pass.
 #include <atomic>
 #include <functional>
 
@@ -14,15 +14,21 @@ struct RenderOptions {
     int spp = 16;
     int threads = 0;        // 0 = all cores
     uint64_t seed = 1;
-    int sppPerPass = 1;     // granularity of cancellation and checkpoints
+    int sppPerPass = 1;     // granularity of checkpoints and of what a cancellation keeps
+    // Samples per pixel the film already holds (a resumed checkpoint): passes start there, and the
+    // image equals an uninterrupted render of `spp` samples bit for bit.
+    int firstSample = 0;
+    // Checked between pixels: a set flag abandons the pass in progress within about one path per
+    // thread, and the film keeps its last finished pass.
     const std::atomic<bool>* cancel = nullptr;
     std::function<void(double fractionDone)> progress;            // called from one thread at a time
-    std::function<void(const Film&, int sppDone)> passFinished;   // e.g. checkpoint writing
+    // After each finished pass, with the statistics of this call's finished passes: checkpoints.
+    std::function<void(const Film&, int sppDone, const PathStats& stats)> passFinished;
     void validate() const;  // throws ConfigError
 };
 
 struct RenderSummary {
-    int sppCompleted = 0;
+    int sppCompleted = 0;   // samples per pixel in the film, including firstSample
     double seconds = 0;
     PathStats stats;
     uint64_t nonFiniteSamples = 0;

@@ -70,7 +70,7 @@ void SlabOptions::validate() const {
             throw ConfigError(std::string("--") + name + ": refractive index must lie in [1, 10], got " + std::to_string(v));
     if (photons < 2) throw ConfigError("--photons: need at least 2 photons, got " + std::to_string(photons));
     if (photons > (uint64_t(1) << 40)) throw ConfigError("--photons: too many (" + std::to_string(photons) + ")");
-    if (threads < 0) throw ConfigError("--threads: must be >= 0, got " + std::to_string(threads));
+    checkThreadCount(threads, "--threads");
 }
 
 SlabResult simulateSlab(const SlabOptions& opt, const std::function<void(uint64_t, uint64_t)>& progress) {

@@ -1,8 +1,11 @@
 #include "scene/scene_loader.h"
 
+#include <cerrno>
 #include <charconv>
+#include <cstring>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -10,6 +13,8 @@
 
 #include "core/errors.h"
 #include "core/math.h"
+#include "core/memory_cap.h"
+#include "core/message.h"
 #include "core/units.h"
 #include "volume/density_grid.h"
 #include "volume/volume_fields.h"
@@ -20,9 +25,107 @@ namespace {
 using json = nlohmann::json;
 namespace fs = std::filesystem;
 
+// Nesting deeper than this is refused while parsing: scenes need about 8 levels, and deeper values
+// would make every recursive walk (serialising a value for a message, destroying it) a stack risk.
+constexpr int kMaxJsonDepth = 64;
+// Scene files are small: data belongs in CSV, mesh and VDB files. A parsed value takes up to about
+// 16 times its text, so the limit also keeps the parsed tree well below the memory cap.
+constexpr uint64_t kMaxSceneBytes = uint64_t(64) << 20;
+constexpr double kMaxEmission = 1e30;
+
+// Appends about `budget` characters of `j` to `out`, written like json::dump(); stops early so a huge
+// value costs no more than its excerpt.
+void dumpInto(const json& j, std::string& out, size_t budget, int depth = 0) {
+    if (out.size() >= budget) return;
+    if (depth > 8 && (j.is_object() || j.is_array())) {
+        out += j.is_object() ? "{...}" : "[...]";
+        return;
+    }
+    if (j.is_object() || j.is_array()) {
+        out += j.is_object() ? '{' : '[';
+        bool first = true;
+        for (auto it = j.begin(); it != j.end() && out.size() < budget; ++it) {
+            if (!first) out += ',';
+            first = false;
+            if (j.is_object()) out += json(excerpt(it.key(), budget)).dump() + ':';
+            dumpInto(it.value(), out, budget, depth + 1);
+        }
+        out += j.is_object() ? '}' : ']';
+    } else if (j.is_string()) {
+        out += json(excerpt(j.get_ref<const std::string&>(), budget)).dump();
+    } else {
+        out += j.dump();
+    }
+}
+
 std::string shortDump(const json& j) {
-    std::string s = j.dump();
-    return s.size() > 80 ? s.substr(0, 77) + "..." : s;
+    std::string s;
+    dumpInto(j, s, kExcerptChars);
+    return s.size() > kExcerptChars ? s.substr(0, kExcerptChars - 3) + "..." : s;
+}
+
+// Thrown from the parser callback; becomes a ConfigError naming the file.
+struct JsonRejected {
+    std::string path, what;
+};
+
+// Parses `text`, refusing nesting deeper than kMaxJsonDepth and repeated keys in an object (nlohmann
+// would silently keep the last one). Messages name the JSON path.
+json parseScene(const std::string& text, const fs::path& file) {
+    struct Frame {
+        bool object = false;
+        std::set<std::string> keys;
+        std::string key;   // objects: the member being parsed
+        size_t index = 0;  // arrays: children started so far
+    };
+    std::vector<Frame> frames;
+    auto path = [&frames] {
+        std::string p;
+        for (const Frame& f : frames) {
+            if (f.object && !f.key.empty()) p += "/" + excerpt(f.key, 40);
+            else if (!f.object && f.index > 0) p += "/" + std::to_string(f.index - 1);
+            if (p.size() > 200) return p.substr(0, 200) + "...";
+        }
+        return p.empty() ? std::string("/") : p;
+    };
+    auto childStarts = [&frames] {
+        if (!frames.empty() && !frames.back().object) ++frames.back().index;
+    };
+    const json::parser_callback_t callback = [&](int depth, json::parse_event_t event, json& parsed) {
+        switch (event) {
+            case json::parse_event_t::object_start:
+            case json::parse_event_t::array_start:
+                childStarts();
+                if (depth >= kMaxJsonDepth)
+                    throw JsonRejected{path(), "nested deeper than " + std::to_string(kMaxJsonDepth) + " levels"};
+                frames.push_back(Frame{event == json::parse_event_t::object_start, {}, {}, 0});
+                break;
+            case json::parse_event_t::object_end:
+            case json::parse_event_t::array_end:
+                frames.pop_back();
+                break;
+            case json::parse_event_t::key: {
+                Frame& f = frames.back();
+                f.key = parsed.get<std::string>();
+                if (!f.keys.insert(f.key).second)
+                    throw JsonRejected{path(), "duplicate key \"" + excerpt(f.key) + "\" (each key may appear once in an object)"};
+                break;
+            }
+            case json::parse_event_t::value:
+                childStarts();
+                break;
+        }
+        return true;
+    };
+    try {
+        return json::parse(text, callback);
+    } catch (const JsonRejected& e) {
+        throw ConfigError(file.string() + ": " + e.path + ": " + e.what);
+    } catch (const json::exception& e) {
+        // parse_error, and out_of_range for a number beyond double ("1e999"). The path is where the
+        // parser had got to; the message quotes the last token, which may be huge.
+        throw ConfigError(file.string() + ": " + path() + ": malformed JSON: " + excerpt(e.what(), 240));
+    }
 }
 
 // A JSON value with its path, so every error names file, field and value.
@@ -43,7 +146,7 @@ public:
     Node at(const std::string& key) const {
         if (!j_.is_object()) fail("expected an object");
         if (!j_.contains(key)) fail("missing required field \"" + key + "\"");
-        return Node(j_.at(key), path_ + "/" + key, file_);
+        return Node(j_.at(key), path_ + "/" + excerpt(key), file_);
     }
     Node at(size_t i) const { return Node(j_.at(i), path_ + "/" + std::to_string(i), file_); }
     size_t size() const { return j_.size(); }
@@ -57,7 +160,7 @@ public:
             if (!allowed.count(it.key())) {
                 std::string list;
                 for (const auto& k : allowed) list += (list.empty() ? "" : ", ") + k;
-                Node(it.value(), path_ + "/" + it.key(), file_).fail("unknown field \"" + it.key() + "\" (allowed: " + list + ")");
+                Node(it.value(), path_ + "/" + excerpt(it.key()), file_).fail("unknown field \"" + excerpt(it.key()) + "\" (allowed: " + list + ")");
             }
     }
     double number() const {
@@ -74,8 +177,11 @@ public:
     }
     int integer(int lo, int hi) const {
         if (!j_.is_number_integer()) fail("expected an integer");
+        const std::string range = "must lie in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
+        // Values from 2^63 up are stored unsigned; read as int64_t they would wrap to negative numbers.
+        if (j_.is_number_unsigned() && j_.get<uint64_t>() > static_cast<uint64_t>(std::numeric_limits<int64_t>::max())) fail(range);
         const auto v = j_.get<int64_t>();
-        if (v < lo || v > hi) fail("must lie in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
+        if (v < lo || v > hi) fail(range);
         return static_cast<int>(v);
     }
     std::string str() const {
@@ -132,7 +238,7 @@ bool startsWithNumber(const std::string& s) {
     double v = 0;
     const char* b = s.data() + (s.size() > 0 && s[0] == '+' ? 1 : 0);
     const auto [ptr, ec] = std::from_chars(b, s.data() + s.size(), v);
-    return ec == std::errc() && ptr != b;
+    return (ec == std::errc() || ec == std::errc::result_out_of_range) && ptr != b;
 }
 
 // References whose values the spectral database already delivers as coefficients in 1/mm.
@@ -234,7 +340,7 @@ private:
             if (coefficient && startsWithNumber(s)) return checked(n, Spectrum::constant(n.quantity(Dimension::InverseLength)), kind);
             if (startsWithNumber(s)) n.fail("write a dimensionless value as a JSON number, not a string");
             if (coefficient && !knownCoefficientUnit(s))
-                n.fail("a coefficient spectrum needs its unit: write {\"reference\": \"" + s + "\", \"unit\": \"/mm\"}");
+                n.fail("a coefficient spectrum needs its unit: write {\"reference\": \"" + excerpt(s) + "\", \"unit\": \"/mm\"}");
             return checked(n, Spectrum::tabulated(resolveNamed(n, s)), kind);
         }
         if (!n.raw().is_object()) n.fail("expected a number, a quantity, a spectrum name or a spectrum object");
@@ -317,6 +423,10 @@ private:
         if (!std::isfinite(maxV) || maxV < 0)
             n.fail("spectrum values must be finite and non-negative");
         if (kind == SpectrumKind::Reflectance && maxV > 1.0) n.fail("a reflectance must not exceed 1");
+        // Transport multiplies emission by throughputs and inverse pdfs; 1e308 would overflow to a
+        // black image made of dropped non-finite samples. 1e30 is the bound lines and scales have too.
+        if (kind == SpectrumKind::Emission && maxV > kMaxEmission)
+            n.fail("emission values must not exceed 1e30 (larger ones overflow in transport)");
         return s;
     }
 
@@ -331,7 +441,7 @@ private:
     void loadMedia(const Node& n, Scene& scene) {
         n.requireObject();
         for (auto it = n.raw().begin(); it != n.raw().end(); ++it) {
-            const Node m(it.value(), n.path() + "/" + it.key(), file_);
+            const Node m(it.value(), n.path() + "/" + excerpt(it.key()), file_);
             m.allowOnly({"sigma_a", "sigma_s", "g", "ior", "dyes", "volume"});
             const Spectrum sa = m.has("sigma_a") ? spectrum(m.at("sigma_a"), SpectrumKind::Coefficient) : Spectrum::constant(0);
             const Spectrum ss = m.has("sigma_s") ? spectrum(m.at("sigma_s"), SpectrumKind::Coefficient) : Spectrum::constant(0);
@@ -388,7 +498,7 @@ private:
             else if (i != "trilinear") v.at("interpolation").fail("expected \"trilinear\" or \"nearest\"");
         }
         MajorantGridOptions majorants;
-        if (v.has("majorant_cell_voxels")) majorants.cellVoxels = static_cast<int>(v.at("majorant_cell_voxels").number(-1, 1 << 20));
+        if (v.has("majorant_cell_voxels")) majorants.cellVoxels = v.at("majorant_cell_voxels").integer(-1, 1 << 20);
         std::vector<VolumeChannel> channels(kFirstDyeChannel + dyes.size());
         std::optional<DensityGrid> reference;  // sets the length unit
         auto gridChannel = [&](const char* key, VolumeChannel& c) {
@@ -415,11 +525,11 @@ private:
         // Length unit of the file's coordinates: the scene's word first, then the file's metadata.
         std::string unit = v.has("length_unit") ? v.at("length_unit").str() : reference->metadata().lengthUnit;
         if (unit.empty())
-            v.fail("the grids in " + f.string() + " carry no \"length_unit\" metadata; give \"length_unit\" (e.g. \"um\") for the file's coordinates");
+            v.fail("the grids in " + excerpt(f.string(), 200) + " carry no \"length_unit\" metadata; give \"length_unit\" (e.g. \"um\") for the file's coordinates");
         const auto unitScaleMm = unitScale(unit, Dimension::Length);
         if (!unitScaleMm) {
             if (v.has("length_unit")) v.at("length_unit").fail("expected a length unit such as \"mm\" or \"um\"");
-            v.fail("the file's length_unit metadata \"" + unit + "\" is not a length unit");
+            v.fail("the file's length_unit metadata \"" + excerpt(unit) + "\" is not a length unit");
         }
         const double scale = v.has("scale") ? v.at("scale").number(0, 1e9, true) : 1.0;
         Affine worldFromFile = Affine::scaling(*unitScaleMm * scale);
@@ -435,17 +545,17 @@ private:
     double gridConcentrationScale(const Node& d, const DensityGrid& grid) {
         const std::string units = d.has("grid_units") ? d.at("grid_units").str() : grid.metadata().units;
         if (units.empty())
-            d.fail("grid \"" + grid.name() + "\" carries no \"units\" metadata; give \"grid_units\" (e.g. \"uM\")");
+            d.fail("grid \"" + excerpt(grid.name()) + "\" carries no \"units\" metadata; give \"grid_units\" (e.g. \"uM\")");
         if (const auto molar = unitScale(units, Dimension::MolarConcentration)) {
             if (d.has("molar_mass")) d.at("molar_mass").fail("a molar mass is only used with mass concentration units such as \"g/L\"");
             return *molar;
         }
         if (const auto mass = unitScale(units, Dimension::MassConcentration)) {
-            if (!d.has("molar_mass")) d.fail("grid units \"" + units + "\" are a mass concentration; give \"molar_mass\"");
+            if (!d.has("molar_mass")) d.fail("grid units \"" + excerpt(units) + "\" are a mass concentration; give \"molar_mass\"");
             return *mass / d.at("molar_mass").positiveQuantity(Dimension::MolarMass);
         }
         if (d.has("grid_units")) d.at("grid_units").fail("expected concentration units such as \"uM\", \"mM\" or \"g/L\"");
-        d.fail("grid \"" + grid.name() + "\" has units \"" + units + "\", which are not a concentration");
+        d.fail("grid \"" + excerpt(grid.name()) + "\" has units \"" + excerpt(units) + "\", which are not a concentration");
     }
 
     // [{"dye": "AF488", "concentration": "10 uM"}, {"dye": "...", "concentration": "0.1 g/L", "molar_mass": "643.4 g/mol"},
@@ -501,7 +611,7 @@ private:
     void loadMaterials(const Node& n, Scene& scene) {
         n.requireObject();
         for (auto it = n.raw().begin(); it != n.raw().end(); ++it) {
-            const Node m(it.value(), n.path() + "/" + it.key(), file_);
+            const Node m(it.value(), n.path() + "/" + excerpt(it.key()), file_);
             const std::string type = m.at("type").str();
             std::unique_ptr<Material> mat;
             if (type == "diffuse") {
@@ -531,15 +641,15 @@ private:
     int mediumRef(const Node& n) const {
         const std::string name = n.str();
         const auto it = mediumIndex_.find(name);
-        if (it == mediumIndex_.end()) n.fail("unknown medium \"" + name + "\"" + known(mediumIndex_));
+        if (it == mediumIndex_.end()) n.fail("unknown medium \"" + excerpt(name) + "\"" + known(mediumIndex_));
         return it->second;
     }
 
     template <class Map>
     static std::string known(const Map& m) {
         std::string s;
-        for (const auto& [k, v] : m) s += (s.empty() ? "" : ", ") + k;
-        return s.empty() ? " (none defined)" : " (defined: " + s + ")";
+        for (const auto& [k, v] : m) s += (s.empty() ? "" : ", ") + excerpt(k, 40);
+        return s.empty() ? " (none defined)" : " (defined: " + excerpt(s, 200) + ")";
     }
 
     void loadShapes(const Node& n, Scene& scene) {
@@ -564,7 +674,12 @@ private:
                     if (f.is_relative()) f = baseDir_ / f;
                     const auto scale = unitScale(s.at("unit").str(), Dimension::Length);
                     if (!scale) s.at("unit").fail("expected a length unit for the file's coordinates, e.g. \"mm\"");
-                    TriangleMesh mesh = loadMesh(f.string());
+                    TriangleMesh mesh;
+                    try {
+                        mesh = loadMesh(f.string());
+                    } catch (const ConfigError& e) {
+                        s.at("file").fail(e.what());  // the file's content, reported at the field naming it
+                    }
                     const Vec3 offset = s.has("translate") ? s.at("translate").vec3(Dimension::Length) : Vec3();
                     for (Vec3& p : mesh.positions) p = p * *scale + offset;
                     id = scene.geometry.addMesh(std::move(mesh));
@@ -588,7 +703,7 @@ private:
             if (s.has("material")) {
                 const Node mn = s.at("material");
                 const auto it = materialIndex_.find(mn.str());
-                if (it == materialIndex_.end()) mn.fail("unknown material \"" + mn.str() + "\"" + known(materialIndex_));
+                if (it == materialIndex_.end()) mn.fail("unknown material \"" + excerpt(mn.str()) + "\"" + known(materialIndex_));
                 const bool dielectric = dielectrics_.count(mn.str()) > 0;
                 if (interface && !dielectric) mn.fail("a shape with interior/exterior media must use a dielectric material or none");
                 if (!interface && dielectric) mn.fail("a dielectric needs \"interior\" and/or \"exterior\" media (their ior set the index ratio)");
@@ -744,21 +859,31 @@ private:
 
 Scene loadSceneFromString(const std::string& text, const fs::path& file, const SpectrumResolver& resolve, const DyeResolver& dyes,
                           const BeamResolver& beams) {
-    json root;
-    try {
-        root = json::parse(text);
-    } catch (const json::parse_error& e) {
-        throw ConfigError(file.string() + ": malformed JSON: " + e.what());
-    }
+    if (text.size() > kMaxSceneBytes)
+        throw ConfigError(file.string() + ": scene text of " + formatBytes(static_cast<double>(text.size())) + " is over the limit of " +
+                          formatBytes(kMaxSceneBytes) + " (put large data in CSV, mesh or VDB files)");
+    const json root = parseScene(text, file);
     return Loader(file, resolve, dyes, beams).load(root);
 }
 
 Scene loadScene(const fs::path& file, const SpectrumResolver& resolve, const DyeResolver& dyes, const BeamResolver& beams) {
-    std::ifstream in(file);
-    if (!in) throw IoError(file.string() + ": cannot open scene file");
-    std::stringstream ss;
-    ss << in.rdbuf();
-    return loadSceneFromString(ss.str(), file, resolve, dyes, beams);
+    std::error_code ec;
+    if (fs::is_directory(file, ec)) throw IoError(file.string() + ": is a folder, expected a scene file (JSON)");
+    std::ifstream in(file, std::ios::binary);
+    if (!in) throw IoError(file.string() + ": cannot open scene file (" + std::strerror(errno) + ")");
+    // Refuse before reading: the text and its parsed tree must stay small (kMaxSceneBytes).
+    const auto size = fs::file_size(file, ec);
+    if (!ec && size > kMaxSceneBytes)
+        throw ConfigError(file.string() + ": scene file of " + formatBytes(static_cast<double>(size)) + " is over the limit of " +
+                          formatBytes(kMaxSceneBytes) + " (put large data in CSV, mesh or VDB files)");
+    std::string text;
+    char buf[1 << 16];
+    while (in.read(buf, sizeof buf) || in.gcount() > 0) {
+        text.append(buf, static_cast<size_t>(in.gcount()));
+        if (text.size() > kMaxSceneBytes) break;  // a file that grows, or /dev/zero: refused below
+    }
+    if (in.bad()) throw IoError(file.string() + ": cannot read scene file");
+    return loadSceneFromString(text, file, resolve, dyes, beams);
 }
 
 }  // namespace fluorosim

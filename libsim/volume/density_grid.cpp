@@ -8,11 +8,16 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <new>
+#include <stdexcept>
 #include <mutex>
 #include <sstream>
 #include <vector>
 
 #include "core/errors.h"
+#include "core/memory_cap.h"
+#include "core/message.h"
 
 namespace fluorosim {
 
@@ -113,11 +118,98 @@ openvdb::FloatGrid::Ptr labelsAsFloats(const openvdb::Int32Grid& labels) {
 
 DensityGrid fromOpenVdb(std::shared_ptr<DensityGrid::Impl> impl, const openvdb::FloatGrid::Ptr& grid, const std::string& where);
 
+// Reads the little-endian fields of a VDB file, refusing any length or offset beyond its end.
+class VdbWalker {
+public:
+    VdbWalker(const std::string& file) : file_(file), in_(file, std::ios::binary) {
+        std::error_code ec;
+        size_ = std::filesystem::file_size(file, ec);
+        if (ec || !in_) throw IoError(file + ": cannot open the VDB file");
+    }
+    uint64_t size() const { return size_; }
+    uint64_t pos() { return static_cast<uint64_t>(in_.tellg()); }
+    uint64_t remaining() { return size_ - std::min(size_, pos()); }
+    template <class T>
+    T read(const char* what) {
+        T v{};
+        if (remaining() < sizeof(T)) corrupt(std::string(what) + " lies beyond the end of the file");
+        in_.read(reinterpret_cast<char*>(&v), sizeof(T));
+        if (!in_) corrupt(std::string("cannot read ") + what);
+        return v;
+    }
+    void skip(uint64_t bytes, const char* what) {
+        if (bytes > remaining())
+            corrupt(std::string(what) + " of " + std::to_string(bytes) + " bytes, with " + std::to_string(remaining()) + " bytes left");
+        in_.seekg(static_cast<std::streamoff>(bytes), std::ios::cur);
+    }
+    void seek(uint64_t offset, const char* what) {
+        if (offset > size_) corrupt(std::string(what) + " at byte " + std::to_string(offset) + ", beyond the end");
+        in_.seekg(static_cast<std::streamoff>(offset));
+    }
+    void string(const char* what) { skip(read<uint32_t>(what), what); }
+    // OpenVDB's MetaMap: count, then (name, type name, byte count, bytes) per entry.
+    void metaMap(const char* what) {
+        const int32_t count = read<int32_t>(what);
+        if (count < 0 || static_cast<uint64_t>(count) > remaining() / 12)
+            corrupt(std::string(what) + ": " + std::to_string(count) + " entries cannot fit in the file");
+        for (int32_t i = 0; i < count; ++i) {
+            string("metadata name");
+            string("metadata type name");
+            skip(read<uint32_t>("metadata size"), "metadata value");
+        }
+    }
+    [[noreturn]] void corrupt(const std::string& what) const {
+        throw IoError(file_ + ": corrupt OpenVDB file (" + what + ", in a file of " + std::to_string(size_) + " bytes)");
+    }
+
+private:
+    std::string file_;
+    std::ifstream in_;
+    uint64_t size_ = 0;
+};
+
 }  // namespace
+
+void checkVdbStructure(const std::string& file) {
+    VdbWalker w(file);
+    if (w.size() < 8 || w.read<int64_t>("magic number") != openvdb::OPENVDB_MAGIC) return;  // OpenVDB says "not a VDB file"
+    const uint32_t version = w.read<uint32_t>("file version");
+    if (version < openvdb::OPENVDB_FILE_VERSION_NO_GRIDMAP) return;  // older layouts: left to OpenVDB
+    w.read<uint32_t>("library major version");
+    w.read<uint32_t>("library minor version");
+    const bool offsets = w.read<char>("grid offsets flag") != 0;
+    if (version < openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION && version >= openvdb::OPENVDB_FILE_VERSION_SELECTIVE_COMPRESSION)
+        w.read<char>("compression flag");
+    w.skip(36, "UUID");
+    w.metaMap("file metadata");
+    if (!offsets) return;  // a stream without descriptors
+    const int32_t grids = w.read<int32_t>("grid count");
+    if (grids < 0 || static_cast<uint64_t>(grids) > w.remaining() / 28)
+        w.corrupt(std::to_string(grids) + " grid descriptors cannot fit in the file");
+    for (int32_t g = 0; g < grids; ++g) {
+        w.string("grid name");
+        w.string("grid type name");
+        if (version >= openvdb::OPENVDB_FILE_VERSION_GRID_INSTANCING) w.string("instance parent name");
+        const auto gridPos = w.read<int64_t>("grid position"), blockPos = w.read<int64_t>("block position"),
+                   endPos = w.read<int64_t>("end position");
+        const auto descriptorEnd = static_cast<int64_t>(w.pos());
+        if (!(gridPos >= descriptorEnd && gridPos <= blockPos && blockPos <= endPos && static_cast<uint64_t>(endPos) <= w.size()))
+            w.corrupt("grid " + std::to_string(g) + " spans bytes " + std::to_string(gridPos) + " to " + std::to_string(endPos));
+        w.seek(static_cast<uint64_t>(gridPos), "grid data");
+        if (version >= openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION) w.read<uint32_t>("grid compression");
+        w.metaMap("grid metadata");
+        if (version >= openvdb::OPENVDB_FILE_VERSION_GRID_INSTANCING) w.string("transform type name");
+        w.seek(static_cast<uint64_t>(endPos), "next grid descriptor");
+    }
+}
 
 DensityGrid DensityGrid::read(const std::string& file, const std::string& gridName, bool allowIntegers) {
     initializeOpenVdb();
-    if (!std::filesystem::exists(file)) throw IoError(file + ": no such file");
+    std::error_code ec;
+    if (!std::filesystem::exists(file, ec)) throw IoError(file + ": no such file");
+    if (std::filesystem::is_directory(file, ec)) throw IoError(file + ": is a folder, expected an OpenVDB file");
+    if (!std::filesystem::is_regular_file(file, ec)) throw IoError(file + ": not a regular file, expected an OpenVDB file");
+    checkVdbStructure(file);
     auto impl = std::make_shared<Impl>();
     impl->name = gridName;
     impl->file = file;
@@ -136,7 +228,14 @@ DensityGrid DensityGrid::read(const std::string& file, const std::string& gridNa
         base = f.readGrid(gridName);
         f.close();
     } catch (const openvdb::Exception& e) {
-        throw IoError(file + ": cannot read as an OpenVDB file: " + e.what());
+        throw IoError(file + ": cannot read as an OpenVDB file: " + excerpt(e.what(), 200));
+    } catch (const std::bad_alloc&) {
+        // Corrupt node counts or sizes deeper in the file than checkVdbStructure looks.
+        throw IoError(file + ": cannot read as an OpenVDB file: out of memory (is the file corrupt?)");
+    } catch (const std::length_error&) {
+        throw IoError(file + ": cannot read as an OpenVDB file: out of memory (is the file corrupt?)");
+    } catch (const std::ios_base::failure& e) {
+        throw IoError(file + ": cannot read as an OpenVDB file: " + excerpt(e.what(), 200));
     }
     const std::string where = file + ": grid \"" + gridName + "\"";
     openvdb::FloatGrid::Ptr grid = openvdb::gridPtrCast<openvdb::FloatGrid>(base);
@@ -188,6 +287,8 @@ DensityGrid fromOpenVdb(std::shared_ptr<DensityGrid::Impl> impl, const openvdb::
         }
     }
     impl->activeVoxels = tree.activeVoxelCount();
+    // The NanoVDB copy is about the size of the OpenVDB tree, which is freed after the conversion.
+    requireMemory(2.0 * static_cast<double>(grid->memUsage()), where + ": holding the grid");
     impl->handle = nanovdb::openToNanoVDB(*grid);
     impl->grid = impl->handle.grid<float>();
     if (!impl->grid) throw Error(where + ": NanoVDB conversion failed");

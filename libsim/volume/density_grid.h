@@ -75,6 +75,11 @@ private:
     std::shared_ptr<const Impl> impl_;
 };
 
+// Walks an OpenVDB file's header, grid descriptors and each grid's metadata and throws IoError when a
+// length or offset there points beyond the end of the file: a corrupt length would otherwise make
+// OpenVDB allocate it (gigabytes) before failing. Files in layouts older than version 219 pass.
+void checkVdbStructure(const std::string& file);
+
 // Writes value(i, j, k) on the voxels of `box` as float grid `name` into an OpenVDB file, with the
 // metadata as string fields (values are written as given, unchecked, so tests can write bad grids).
 // Appends to the grids already listed in `others` (name, box, value) so one file can hold several.

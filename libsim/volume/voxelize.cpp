@@ -19,7 +19,9 @@
 #include <unordered_map>
 
 #include "core/errors.h"
+#include "core/memory_cap.h"
 #include "core/parallel.h"
+#include "volume/density_grid.h"
 
 namespace fluorosim {
 namespace {
@@ -114,9 +116,25 @@ struct Kernel {
     double deepMargin() const { return mode == LabelMode::Filled ? 0.0 : thickness; }
 };
 
+// Memory per block, from the containers below: a block cut by the surface holds float coverage in its
+// BlockResult, a dense GridBlock, label and best-coverage arrays, and later an OpenVDB leaf (2 KiB
+// each) plus its registry entry; a block deep inside holds map entries only.
+constexpr double kBytesPerCutBlock = 9 * 1024.0;
+constexpr double kBytesPerDeepBlock = 512.0;
+
+// Counts registered blocks across neurons and refuses the voxelization once their memory passes the
+// cap, before the blocks (and minutes of work on them) are allocated.
+struct BlockBudget {
+    double cut = 0, deep = 0;
+    std::string what;
+    double bytes() const { return cut * kBytesPerCutBlock + deep * kBytesPerDeepBlock; }
+    void check() const { requireMemory(bytes(), what); }
+};
+
 // Blocks that can hold a voxel with some point inside a piece, and the pieces to test there.
-BlockMap<BlockEntry> registerBlocks(const std::vector<Piece>& pieces, const Kernel& kernel) {
+BlockMap<BlockEntry> registerBlocks(const std::vector<Piece>& pieces, const Kernel& kernel, BlockBudget& budget) {
     BlockMap<BlockEntry> blocks;
+    uint64_t sinceCheck = 0;
     for (uint32_t idx = 0; idx < pieces.size(); ++idx) {
         const Piece& p = pieces[idx];
         // Walk long cones in sub-ranges of about one block so the boxes scanned stay close to the piece.
@@ -137,18 +155,27 @@ BlockMap<BlockEntry> registerBlocks(const std::vector<Piece>& pieces, const Kern
                                           z * kBlockDim + (kBlockDim - 1) * 0.5);
                         const double d = p.sdf(centre);
                         if (d >= kBlockReach) continue;
-                        BlockEntry& e = blocks[BlockKey{x, y, z}];
+                        const auto [it, inserted] = blocks.try_emplace(BlockKey{x, y, z});
+                        BlockEntry& e = it->second;
                         if (e.deep || (!e.pieces.empty() && e.pieces.back() == idx)) continue;
                         if (d + kBlockReach < -kernel.deepMargin()) {
+                            if (!inserted) budget.cut -= 1;
+                            budget.deep += 1;
                             e.deep = true;
                             e.pieces.clear();
                             e.pieces.shrink_to_fit();
                         } else {
+                            if (inserted) budget.cut += 1;
                             e.pieces.push_back(idx);
+                        }
+                        if (inserted && ++sinceCheck == 4096) {
+                            sinceCheck = 0;
+                            budget.check();
                         }
                     }
         }
     }
+    budget.check();
     return blocks;
 }
 
@@ -373,8 +400,12 @@ Voxelized voxelize(const std::vector<NeuronVolumeInput>& neurons, const Voxelize
 
     std::vector<BlockMap<BlockEntry>> registries(neurons.size());
     size_t totalBlocks = 0;
+    BlockBudget budget;
+    budget.what = "voxel size " + mmText(h) + ": voxelizing " + neurons[0].morphology.source +
+                  (neurons.size() > 1 ? " and " + std::to_string(neurons.size() - 1) + " more neurons" : std::string()) +
+                  " (counting its blocks of 8^3 voxels, stopped at the cap)";
     for (size_t i = 0; i < neurons.size(); ++i) {
-        registries[i] = registerBlocks(pieces[i], kernel);
+        registries[i] = registerBlocks(pieces[i], kernel, budget);
         totalBlocks += registries[i].size();
     }
 
@@ -491,7 +522,7 @@ void VoxelizeOptions::validate() const {
         throw ConfigError("membrane thickness: must be positive and finite, got " + mmText(*membraneThicknessMm));
     if (supersampling < 1 || supersampling > 16)
         throw ConfigError("supersampling: must lie in [1, 16] points per axis, got " + std::to_string(supersampling));
-    if (threads < 0) throw ConfigError("threads: must be 0 (all cores) or positive, got " + std::to_string(threads));
+    checkThreadCount(threads, "threads");
 }
 
 VoxelizeSummary voxelizeNeurons(const std::vector<NeuronVolumeInput>& neurons, const VoxelizeOptions& options) {
@@ -559,6 +590,7 @@ VoxelizeSummary writeVoxelizedVdb(const std::string& path, const std::vector<Neu
 
 std::vector<VdbGridStats> readVdbGridStats(const std::string& path) {
     initOpenVdb();
+    checkVdbStructure(path);
     openvdb::GridPtrVecPtr grids;
     try {
         openvdb::io::File file(path);
@@ -567,6 +599,8 @@ std::vector<VdbGridStats> readVdbGridStats(const std::string& path) {
         file.close();
     } catch (const openvdb::Exception& e) {
         throw IoError(path + ": cannot read the VDB file: " + e.what());
+    } catch (const std::bad_alloc&) {
+        throw IoError(path + ": cannot read the VDB file: out of memory (is the file corrupt?)");
     }
     std::vector<VdbGridStats> out;
     for (const openvdb::GridBase::Ptr& base : *grids) {

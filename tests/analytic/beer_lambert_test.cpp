@@ -62,5 +62,28 @@ TEST(BeerLambert, SlabPureAbsorberMatchedBoundaries) {
     EXPECT_EQ(r.Tt, r.Tballistic);
 }
 
+// A 1 um bead 100 mm from the origin: shadow rays and path-traced rays must enter and leave it (found
+// in review: an offset too large for the bead's size skipped it).
+TEST(BeerLambert, TinyBeadFarFromOriginIsCrossedExactly) {
+    Scene scene;
+    addEnclosure(scene, 500, 1.0);
+    const int ink = addMedium(scene, "ink", 200.0, 0.0, 0.0, 1.0);
+    const double r = 1e-3;
+    addInterfaceSphere(scene, Vec3(100, 0, 0), r, ink, kNone);
+    scene.finalize();
+    const PathTracer tracer(scene);
+    const SampledWavelengths wl = SampledWavelengths::sampleUniform(0.1, 400, 700);
+    Rng exactRng;  // unused: homogeneous transmittance is exact
+    const SampledSpectrum T = tracer.transmittance(Vec3(100, 0, -1), Vec3(100, 0, 1), kNone, wl, exactRng);
+    EXPECT_NEAR(T[0], std::exp(-200.0 * 2 * r), 1e-9);
+    // Path tracing through the bead: every path must come out and reach the enclosure (no stuck medium).
+    PathStats stats;
+    const auto [mean, se] = testing::meanOf(20000, [&](int i) {
+        Rng rng = Rng::forKey(3, static_cast<uint64_t>(i), 0);
+        return tracer.radiance(Ray{Vec3(100, 0, -1), Vec3(0, 0, 1)}, kNone, wl, rng, stats).total().average();
+    });
+    EXPECT_NEAR(mean, std::exp(-0.4), 4 * se + 1e-12);
+}
+
 }  // namespace
 }  // namespace fluorosim

@@ -172,9 +172,11 @@ namespace {
 
 // The paper's concentration series (Alexa Fluor 488 at 0.1, 1 and 10 g/L, lit at 495 nm), on a clear
 // ball of radius 0.2 mm so that the series spans optically thin to thick. Absorption follows
-// Beer–Lambert exactly (closed-form chord integral) and saturates; the fluorescence that escapes is
+// Beer–Lambert exactly and saturates: the forward tracer's absorbed power must equal the closed-form
+// chord integral (absorbedByBall) within 4 standard errors. The fluorescence that escapes is
 // Φ × absorbed × an escape efficiency that falls with concentration (the inner filter: AF488
-// re-absorbs the blue side of its own emission, and each re-emission loses 1 − Φ).
+// re-absorbs the blue side of its own emission, and each re-emission loses 1 − Φ); it has no closed
+// form, so it is checked for saturation and roll-off only.
 TEST(FluorescenceClosedForm, Af488ConcentrationSeriesSaturatesAndRollsOff) {
     const double R = 0.2, D = 5, I = 1, lambdaX = 495;
     const Fluorophore dye = databaseDye("AF488");
@@ -202,6 +204,17 @@ TEST(FluorescenceClosedForm, Af488ConcentrationSeriesSaturatesAndRollsOff) {
                     gramsPerLitre, sigma, absorbed / reaching, efficiency.back(), efficiencyErr.back(), brightness.back(), brightnessErr.back());
         // Re-emission can only lose photons (Φ < 1, and nothing else emits).
         EXPECT_LT(efficiency.back(), 1.0 + 4 * efficiencyErr.back());
+        // The closed form: Beer–Lambert absorption along the chords of the ball.
+        ForwardPhotonOptions f;
+        f.aimRadius = R * 1.0001;
+        f.photons = 200000;
+        f.seed = 32;
+        const ForwardPhotonResult fwd = traceForwardPhotons(scene, f);
+        const double za = (fwd.absorbedPower.mean - absorbed) / fwd.absorbedPower.stderr_;
+        std::printf("  %5.1f g/L: forward tracer absorbed %.6g +- %.2g W, closed form %.6g W, z = %+.2f\n", gramsPerLitre,
+                    fwd.absorbedPower.mean, fwd.absorbedPower.stderr_, absorbed, za);
+        EXPECT_LT(std::abs(za), 4.0);
+        EXPECT_LT(fwd.absorbedPower.stderr_, 0.01 * absorbed);
     }
     // Rises while absorption is not saturated...
     EXPECT_GT(brightness[1] - brightness[0], 4 * std::hypot(brightnessErr[0], brightnessErr[1]));

@@ -111,5 +111,22 @@ TEST(FluorescentSlab, RejectsBadQuantumYield) {
     EXPECT_THROW(o.validate(), std::exception);
 }
 
+// A transparent emission band inside n = 1.4 traps re-emitted photons by total internal reflection
+// forever; they must be tallied as guided, not loop (found in review).
+TEST(FluorescentSlab, GuidedPhotonsTerminate) {
+    SlabOptions o;
+    o.mus = 1.0;
+    o.muaDye = 0.5;
+    o.quantumYield = 1.0;
+    o.thickness = 1.0;
+    o.n = 1.4;
+    o.emission = SlabBand{0.0, 0.0, 0.0, 0.0};
+    o.photons = 100000;
+    const SlabResult r = simulateSlab(o);
+    EXPECT_GT(r.guided, 0.05);
+    EXPECT_NEAR(r.Rd + r.Tt + r.Rf + r.Tf + r.guided + r.Rsp, 1.0, 1e-12);
+    EXPECT_NEAR(r.Ta, 0.0, 1e-12);
+}
+
 }  // namespace
 }  // namespace fluorosim

@@ -120,6 +120,20 @@ TEST(Furnace, AbsorptionLowersRadiance) {
     EXPECT_LT(e.mean + 10 * e.stderr_, kLe);
 }
 
+// Strongly wavelength-dependent scattering (no absorption): hero-wavelength MIS with analytic
+// shadow-ray transmittance must still return the field at every wavelength (found in review).
+TEST(WhiteFurnace, ChromaticScattering) {
+    Scene scene;
+    addEnclosure(scene, 20, 2.0);
+    const Spectrum sigmaS = Spectrum::tabulated(TabulatedSpectrum({380, 500, 620, 720}, {8.0, 0.5, 3.0, 0.05}));
+    scene.media.emplace_back("chromatic", Spectrum::constant(0.0), sigmaS, 0.6, 1.0);
+    addInterfaceSphere(scene, Vec3(0, 0, 0), 1.0, 0, kNone);
+    scene.finalize();
+    const auto e = meanRadiance(scene, Vec3(0, 0, -8), kNone, Vec3(0, 0, 0), 1.0, 40000, 21, 380, 720);
+    EXPECT_NEAR(e.mean, 2.0, 4 * e.stderr_) << "stderr " << e.stderr_;
+    EXPECT_GT(e.stderr_, 0.0);
+}
+
 // A smooth glass cube traps light by total internal reflection: from inside, directions whose three
 // cosines all lie below the critical cosine never leave, and nothing is lost per reflection. Paths must
 // still end after a bounded number of vertices (roulette survival is capped below 1), and from outside

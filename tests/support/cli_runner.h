@@ -2,6 +2,7 @@
 // Runs the fluorosim CLI from tests: a per-test temporary folder, captured stdout and stderr, exit
 // codes, and a check that an error is one clear line.
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -13,6 +14,8 @@
 #include <sstream>
 #include <string>
 #include <vector>
+
+#include "support/temp_dir.h"
 
 namespace fluorosim::testing {
 
@@ -37,30 +40,9 @@ struct RunResult {
     int exitCode = -1;  // 128+N when killed by signal N (as the shell reports it)
     std::string out, err;
     double seconds = 0;
-};
-
-// A per-test temporary folder, removed at the end of the test.
-class TempDir {
-public:
-    TempDir() {
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        path_ = fs::temp_directory_path() / ("fluorosim_cli_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
-        fs::remove_all(path_);
-        fs::create_directories(path_);
-    }
-    ~TempDir() {
-        std::error_code ec;
-        fs::remove_all(path_, ec);
-    }
-    const fs::path& path() const { return path_; }
-    fs::path write(const std::string& name, const std::string& text) const {
-        const fs::path p = path_ / name;
-        std::ofstream(p) << text;
-        return p;
-    }
-
-private:
-    fs::path path_;
+    // Peak resident memory of the largest child this test process has waited for so far (the kernel
+    // keeps only that maximum), in KiB: with one command per test, that command's peak.
+    long maxRssKb = 0;
 };
 
 // Runs the CLI with `args`, stdin from /dev/null, stdout and stderr captured to files in `dir`.
@@ -77,6 +59,8 @@ inline RunResult runCli(const TempDir& dir, const std::vector<std::string>& args
     r.exitCode = status == -1 ? -1 : WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
     r.out = readFile(outFile);
     r.err = readFile(errFile);
+    rusage usage{};
+    if (::getrusage(RUSAGE_CHILDREN, &usage) == 0) r.maxRssKb = usage.ru_maxrss;
     return r;
 }
 

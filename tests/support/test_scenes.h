@@ -6,6 +6,7 @@
 #include "core/rng.h"
 #include "render/path_tracer.h"
 #include "scene/scene.h"
+#include "spectral/color.h"
 #include "spectral/wavelength_sampler.h"
 
 namespace fluorosim::testing {
@@ -73,6 +74,29 @@ inline Estimate meanRadiance(const Scene& scene, const Vec3& origin, int originM
         const Vec3 dir = normalize(target + p * targetRadius - origin);
         return tracer.radiance(Ray{origin, dir}, originMedium, wl, rng, stats).total().average();
     });
+}
+
+// Colour matching functions equal to 1 everywhere: the film's XYZ sums are then plain radiance sums.
+inline ColorMatchingFunctions flatCmf() {
+    const TabulatedSpectrum one({360, 830}, {1, 1});
+    return {one, one, one};
+}
+
+// A glass ball of thin scattering fog (index 1.33) in a glowing enclosure, seen by a width x height
+// camera: paths of varied length, for tests of the render driver.
+inline Scene foggyBallScene(int width, int height) {
+    Scene scene;
+    addEnclosure(scene, 20, 1.0);
+    const int m = addMedium(scene, "fog", 0.05, 2.0, 0.6, 1.33);
+    scene.materials.push_back(makeDielectric(0.0));
+    addInterfaceSphere(scene, Vec3(0, 0, 0), 1.0, m, kNone, 0);
+    scene.camera.position = Vec3(0, 0, -6);
+    scene.camera.frame = Frame{Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0, 0, 1)};
+    scene.camera.width = width;
+    scene.camera.height = height;
+    scene.camera.tanHalfFovY = 0.3;
+    scene.finalize();
+    return scene;
 }
 
 }  // namespace fluorosim::testing

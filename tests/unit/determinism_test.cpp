@@ -7,25 +7,9 @@
 namespace fluorosim {
 namespace {
 
-ColorMatchingFunctions flatCmf() {
-    const TabulatedSpectrum one({360, 830}, {1, 1});
-    return {one, one, one};
-}
+using testing::flatCmf;
 
-Scene smallScene() {
-    Scene scene;
-    testing::addEnclosure(scene, 20, 1.0);
-    const int m = testing::addMedium(scene, "fog", 0.05, 2.0, 0.6, 1.33);
-    scene.materials.push_back(makeDielectric(0.0));
-    testing::addInterfaceSphere(scene, Vec3(0, 0, 0), 1.0, m, kNone, 0);
-    scene.camera.position = Vec3(0, 0, -6);
-    scene.camera.frame = Frame{Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0, 0, 1)};
-    scene.camera.width = 12;
-    scene.camera.height = 9;
-    scene.camera.tanHalfFovY = 0.3;
-    scene.finalize();
-    return scene;
-}
+Scene smallScene() { return testing::foggyBallScene(12, 9); }
 
 ExrImage renderWith(const Scene& scene, int threads, int sppPerPass) {
     Film film(scene.camera.width, scene.camera.height, 400, 700, 20, flatCmf());
@@ -73,7 +57,7 @@ TEST(Cancellation, KeepsFinishedPasses) {
     opt.spp = 8;
     opt.sppPerPass = 2;
     opt.cancel = &cancel;
-    opt.passFinished = [&](const Film&, int done) {
+    opt.passFinished = [&](const Film&, int done, const PathStats&) {
         if (done == 4) cancel = true;
     };
     const RenderSummary s = render(scene, film, opt);

@@ -6,14 +6,15 @@
 
 #include "core/errors.h"
 #include "geometry/geometry.h"
+#include "support/temp_dir.h"
 
 namespace fluorosim {
 namespace {
 
+// One folder per test process, removed at exit.
 std::string writeTemp(const std::string& name, const std::string& text) {
-    const auto path = std::filesystem::temp_directory_path() / ("fluorosim_" + std::to_string(::getpid()) + "_" + name);
-    std::ofstream(path) << text;
-    return path.string();
+    static const testing::TempDir dir;
+    return dir.write(name, text).string();
 }
 
 TEST(MeshLoader, ReadsAsciiPly) {

@@ -13,6 +13,7 @@
 #include "core/errors.h"
 #include "database.h"
 #include "scene/scene_loader.h"
+#include "support/temp_dir.h"
 
 namespace fluorosim {
 namespace {
@@ -545,6 +546,77 @@ TEST(SceneLoaderCoverage, PartialTablesWarn) {
     ASSERT_FALSE(scene.warnings.empty());
     EXPECT_TRUE(contains(scene.warnings[0], "/materials/white/reflectance")) << scene.warnings[0];
     EXPECT_TRUE(contains(scene.warnings[0], "0 outside its table")) << scene.warnings[0];
+}
+
+// ---- JSON structure: duplicates, nesting, numbers beyond range ----
+
+TEST(SceneLoader, DuplicateKeysAreRefusedNamingKeyAndPath) {
+    const std::string text = minimalScene().dump();
+    expectRejectedText(text.substr(0, text.size() - 1) + ",\"camera\":{}}", {"/camera", "duplicate key \"camera\""});
+    json j = minimalScene();
+    std::string t = j.dump();
+    t.insert(t.find("\"radius\""), "\"radius\":\"1 mm\",");
+    expectRejectedText(t, {"/shapes/1/radius", "duplicate key \"radius\""});
+}
+
+TEST(SceneLoader, DeepNestingIsRefusedWhileParsing) {
+    // 100 000 levels used to overflow the stack in the recursive dump() of the error message.
+    const std::string text = minimalScene().dump();
+    const std::string deep = std::string(100000, '[') + std::string(100000, ']');
+    expectRejectedText(text.substr(0, text.size() - 1) + ",\"notes\":" + deep + "}", {"/notes/0/0", "nested deeper than 64"});
+    std::string objects;
+    for (int i = 0; i < 100000; ++i) objects += "{\"a\":";
+    objects += "1" + std::string(100000, '}');
+    expectRejectedText(text.substr(0, text.size() - 1) + ",\"microscope\":" + objects + "}", {"/microscope/a/a", "nested deeper"});
+    // Up to the limit is fine for the parser (the loader then refuses the unknown field).
+    expectRejectedText(text.substr(0, text.size() - 1) + ",\"zzz\":" + std::string(60, '[') + std::string(60, ']') + "}",
+                       {"/zzz", "unknown field"});
+}
+
+TEST(SceneLoader, NumberBeyondDoubleNamesTheField) {
+    std::string text = minimalScene().dump();
+    text.insert(text.find("\"fov_y_deg\":") + 12, "1e999,\"x\":");
+    expectRejectedText(text, {"/camera/fov_y_deg", "1e999"});
+}
+
+TEST(SceneLoader, UnsignedIntegersDoNotWrapIntoRange) {
+    // 2^64 - 1 read as int64_t is -1, which is in range for majorant_cell_voxels; 2^63 is -2^63.
+    std::string text = minimalScene().dump();
+    const auto p = text.find("\"seed\":3");
+    expectRejectedText(std::string(text).replace(p, 8, "\"seed\":18446744073709551615"), {"/render/seed", "18446744073709551615"});
+    expectRejectedText(std::string(text).replace(p, 8, "\"seed\":9223372036854775808"), {"/render/seed", "9223372036854775808"});
+}
+
+TEST(SceneLoader, EmissionThatWouldOverflowIsRefused) {
+    json j = minimalScene();
+    j["lights"][0]["intensity"] = 1e308;
+    expectRejected(j, {"/lights/0/intensity", "1e+308", "1e30"});
+}
+
+TEST(SceneLoader, EchoedValuesAreExcerpts) {
+    json j = minimalScene();
+    j["shapes"][1]["radius"] = "1 " + std::string(1 << 20, 'x');
+    try {
+        load(j);
+        ADD_FAILURE() << "accepted";
+    } catch (const ConfigError& e) {
+        EXPECT_LT(std::string(e.what()).size(), 600u);
+        EXPECT_TRUE(contains(e.what(), "(1048578 characters)")) << e.what();
+    }
+}
+
+TEST(SceneLoader, FoldersAreNotSceneFiles) {
+    const testing::TempDir dir;
+    try {
+        loadScene(dir.path(), resolver());
+        FAIL() << "accepted";
+    } catch (const IoError& e) {
+        EXPECT_TRUE(contains(e.what(), "is a folder")) << e.what();
+    }
+    fs::create_directory(dir.file("block.obj"));
+    json j = minimalScene();
+    j["shapes"].push_back({{"type", "mesh"}, {"file", (dir.path() / "block.obj").string()}, {"unit", "mm"}, {"material", "white"}});
+    expectRejected(j, {"/shapes/3/file", "is a folder"}, true);
 }
 
 }  // namespace

@@ -8,6 +8,7 @@
 
 #include "core/errors.h"
 #include "support/fluorescent_scenes.h"
+#include "support/temp_dir.h"
 #include "scene/scene_loader.h"
 #include "volume/density_grid.h"
 
@@ -17,14 +18,10 @@ namespace {
 using json = nlohmann::json;
 namespace fs = std::filesystem;
 
-const fs::path kDir = fs::temp_directory_path() / "fluorosim_scene_volume_test";
-const fs::path kScene = kDir / "scene.json";
-
-// tissue.vdb: "AF488" (2 on a 10^3 block, units uM, length_unit mm), "bare" (no metadata), "mus".
-void writeGrids() {
-    fs::create_directories(kDir);
+// tissue.vdb in `dir`: "AF488" (2 on a 10^3 block, units uM, length_unit mm), "bare" (no metadata), "mus".
+void writeGrids(const fs::path& dir) {
     const auto two = [](int, int, int) { return 2.0; };
-    writeVoxelGrids((kDir / "tissue.vdb").string(), Affine::scaling(0.01),
+    writeVoxelGrids((dir / "tissue.vdb").string(), Affine::scaling(0.01),
                     {{"AF488", {{0, 0, 0}, {9, 9, 9}}, two, {"uM", "mm"}},
                      {"bare", {{0, 0, 0}, {9, 9, 9}}, two, {}},
                      {"mus", {{0, 0, 0}, {9, 9, 9}}, [](int, int, int) { return 0.5; }, {"", "mm"}}});
@@ -41,13 +38,22 @@ json scene(const json& medium) {
                                              {"intensity", {{"lines", json::array({json{{"wavelength", "488 nm"}, {"power", 1}}})}}}}})}};
 }
 
-Scene load(const json& j) {
+// Each test writes its grids into its own folder: tests run in parallel (ctest -j2).
+class SceneVolume : public ::testing::Test {
+protected:
+    void SetUp() override { writeGrids(dir_.path()); }
+    Scene load(const json& j) const;
+    std::string error(const json& j) const;
+    testing::TempDir dir_;
+};
+
+Scene SceneVolume::load(const json& j) const {
     const SpectrumResolver r = [](const std::string& ref, const fs::path& base) { return testing::database().resolve(ref, base); };
     const DyeResolver d = [](const std::string& n, std::optional<double> ec, std::optional<double> qy) { return testing::database().fluorophore(n, ec, qy); };
-    return loadSceneFromString(j.dump(), kScene, r, d);
+    return loadSceneFromString(j.dump(), dir_.file("scene.json"), r, d);
 }
 
-std::string error(const json& j) {
+std::string SceneVolume::error(const json& j) const {
     try {
         (void)load(j);
     } catch (const Error& e) {
@@ -62,8 +68,7 @@ json gridMedium() {
                 {"volume", {{"file", "tissue.vdb"}, {"scattering_grid", "mus"}}}};
 }
 
-TEST(SceneVolume, GridMediumLoadsWithUnitsFromMetadata) {
-    writeGrids();
+TEST_F(SceneVolume, GridMediumLoadsWithUnitsFromMetadata) {
     const Scene s = load(scene(gridMedium()));
     const Medium& m = s.media[0];
     ASSERT_FALSE(m.isHomogeneous());
@@ -78,8 +83,7 @@ TEST(SceneVolume, GridMediumLoadsWithUnitsFromMetadata) {
     EXPECT_NEAR(m.channelMax()[kFirstDyeChannel], 2e-6, 1e-12);
 }
 
-TEST(SceneVolume, SceneUnitsAndTransformOverrideTheFile) {
-    writeGrids();
+TEST_F(SceneVolume, SceneUnitsAndTransformOverrideTheFile) {
     json med = gridMedium();
     med["dyes"][0]["grid"] = "bare";
     med["dyes"][0]["grid_units"] = "nM";
@@ -95,8 +99,7 @@ TEST(SceneVolume, SceneUnitsAndTransformOverrideTheFile) {
     EXPECT_EQ(ch[kFirstDyeChannel], 0.0);
 }
 
-TEST(SceneVolume, BadVolumeInputNamesPathAndValue) {
-    writeGrids();
+TEST_F(SceneVolume, BadVolumeInputNamesPathAndValue) {
     json med = gridMedium();
     med["dyes"][0]["grid"] = "bare";
     EXPECT_NE(error(scene(med)).find("/media/tissue/dyes/0: grid \"bare\" carries no \"units\" metadata"), std::string::npos) << error(scene(med));

@@ -13,6 +13,7 @@
 
 #include "core/errors.h"
 #include "database.h"
+#include "support/temp_dir.h"
 
 namespace fluorosim {
 namespace {
@@ -33,30 +34,7 @@ double argmax(const TabulatedSpectrum& s) {
 
 bool contains(const std::string& haystack, const std::string& needle) { return haystack.find(needle) != std::string::npos; }
 
-// A per-test temporary folder, removed at the end of the test.
-class TempDir {
-public:
-    TempDir() {
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        path_ = fs::temp_directory_path() /
-                ("fluorosim_db_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
-        fs::remove_all(path_);
-        fs::create_directories(path_);
-    }
-    ~TempDir() {
-        std::error_code ec;
-        fs::remove_all(path_, ec);
-    }
-    fs::path write(const std::string& name, const std::string& text) const {
-        const fs::path p = path_ / name;
-        std::ofstream(p) << text;
-        return p;
-    }
-    const fs::path& path() const { return path_; }
-
-private:
-    fs::path path_;
-};
+using testing::TempDir;
 
 TEST(SpectralDatabase, Cie1931) {
     const auto cmf = db().cie1931();

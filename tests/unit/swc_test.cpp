@@ -12,6 +12,7 @@
 
 #include "core/errors.h"
 #include "morphology/swc.h"
+#include "support/temp_dir.h"
 
 namespace fluorosim {
 namespace {
@@ -19,10 +20,10 @@ namespace {
 namespace fs = std::filesystem;
 constexpr double kPi = std::numbers::pi;
 
+// One folder per test process, removed at exit.
 fs::path writeTemp(const std::string& name, const std::string& text) {
-    const fs::path p = fs::temp_directory_path() / ("fluorosim_swc_" + std::to_string(::getpid()) + "_" + name);
-    std::ofstream(p, std::ios::binary) << text;
-    return p;
+    static const testing::TempDir dir;
+    return dir.write(name, text);
 }
 
 // The ConfigError message parseSwc gives for `text`, or "" if it parses.

@@ -149,5 +149,27 @@ TEST(Units, UnitScale) {
     EXPECT_FALSE(unitScale("parsec", Dimension::Length).has_value());
 }
 
+TEST(Units, ProductBeyondDoubleIsRejected) {
+    // 1e308 is finite in metres but not in millimetres; it used to come back as inf.
+    expectRejected("1e308 m", Dimension::Length);
+    expectRejected("1e306 /nm", Dimension::InverseLength);
+    expectRejected("1e400 mm", Dimension::Length);
+    expectRejected("1e308", Dimension::Length, "m");
+    EXPECT_DOUBLE_EQ(parseQuantity("1e300 m", Dimension::Length, "x"), 1e303);
+}
+
+TEST(Units, HugeTextIsEchoedAsAnExcerpt) {
+    const std::string unit(50 << 20, 'x');
+    try {
+        parseQuantity("1 " + unit, Dimension::Length, "--the-option");
+        ADD_FAILURE() << "accepted";
+    } catch (const ConfigError& e) {
+        const std::string msg = e.what();
+        EXPECT_LT(msg.size(), 400u);
+        EXPECT_NE(msg.find("--the-option"), std::string::npos) << msg;
+        EXPECT_NE(msg.find("(52428802 characters)"), std::string::npos) << msg;
+    }
+}
+
 }  // namespace
 }  // namespace fluorosim

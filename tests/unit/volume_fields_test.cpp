@@ -10,18 +10,13 @@
 
 #include "core/errors.h"
 #include "core/rng.h"
+#include "support/temp_dir.h"
 #include "volume/volume_fields.h"
 
 namespace fluorosim {
 namespace {
 
 namespace fs = std::filesystem;
-
-fs::path tempFile(const std::string& name) {
-    const fs::path dir = fs::temp_directory_path() / "fluorosim_volume_test";
-    fs::create_directories(dir);
-    return dir / name;
-}
 
 Affine voxels(double size, const Vec3& origin = Vec3()) { return Affine::scaling(size).then(Affine::translation(origin)); }
 
@@ -133,7 +128,8 @@ std::string readError(const fs::path& file, const std::string& grid, bool labels
 }
 
 TEST(DensityGrid, BadVoxelsAreRejectedWithGridNameAndCoordinate) {
-    const fs::path file = tempFile("bad_voxels.vdb");
+    const testing::TempDir dir;
+    const fs::path file = dir.file("bad_voxels.vdb");
     auto bad = [](double v) {
         return [v](int i, int j, int k) { return (i == 3 && j == 4 && k == 5) ? v : 1.0; };
     };
@@ -161,6 +157,8 @@ TEST(DensityGrid, BadVoxelsAreRejectedWithGridNameAndCoordinate) {
 }
 
 TEST(DensityGrid, MissingEmptyAndForeignFilesGiveClearErrors) {
+    const testing::TempDir dir;
+    const auto tempFile = [&](const std::string& name) { return dir.file(name); };
     EXPECT_THROW((void)DensityGrid::read(tempFile("does_not_exist.vdb").string(), "x"), IoError);
     EXPECT_NE(readError(tempFile("does_not_exist.vdb"), "x").find("no such file"), std::string::npos);
     const fs::path empty = tempFile("empty.vdb");
@@ -185,6 +183,39 @@ TEST(VolumeFields, GridsOfOneMediumMustShareTheirVoxels) {
     } catch (const ConfigError& e) {
         EXPECT_NE(std::string(e.what()).find("different transform"), std::string::npos) << e.what();
     }
+}
+
+TEST(DensityGrid, CorruptLengthsAreRefusedBeforeOpenVdbAllocatesThem) {
+    // A grid type name claiming 2 GB used to make OpenVDB allocate and fill it (gigabytes, a minute)
+    // before failing; the file's structure is now checked against its size first.
+    const testing::TempDir dir;
+    const fs::path file = dir.file("grid.vdb");
+    writeVoxelGrids(file.string(), voxels(1), {{"density", {{0, 0, 0}, {7, 7, 7}}, [](int, int, int) { return 1.0; }}});
+    std::string bytes;
+    {
+        std::ifstream in(file, std::ios::binary);
+        bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    }
+    const auto at = bytes.find("Tree_float_5_4_3");
+    ASSERT_NE(at, std::string::npos);
+    bytes.replace(at - 4, 4, std::string("\xff\xff\xff\x7f", 4));
+    std::ofstream(file, std::ios::binary | std::ios::trunc) << bytes;
+    EXPECT_THROW(checkVdbStructure(file.string()), IoError);
+    const std::string e = readError(file, "density");
+    EXPECT_NE(e.find("corrupt OpenVDB file"), std::string::npos) << e;
+    EXPECT_NE(e.find("grid type name of 2147483647 bytes"), std::string::npos) << e;
+    EXPECT_NE(e.find(file.string()), std::string::npos) << e;
+}
+
+TEST(DensityGrid, ValidFilesPassTheStructureCheck) {
+    const testing::TempDir dir;
+    const fs::path file = dir.file("two.vdb");
+    writeVoxelGrids(file.string(), voxels(0.5),
+                    {{"a", {{0, 0, 0}, {9, 9, 9}}, [](int, int, int) { return 2.0; }, {"uM", "mm"}},
+                     {"b", {{-4, 0, 0}, {3, 3, 3}}, [](int, int, int) { return 1.0; }, {}, true}});
+    EXPECT_NO_THROW(checkVdbStructure(file.string()));
+    EXPECT_NO_THROW((void)DensityGrid::read(file.string(), "a"));
+    EXPECT_NO_THROW((void)DensityGrid::read(file.string(), "b", true));
 }
 
 }  // namespace

@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "core/errors.h"
+#include "core/memory_cap.h"
 #include "core/rng.h"
 #include "morphology/swc.h"
 #include "volume/voxelize.h"
@@ -333,8 +334,10 @@ TEST(Voxelize, CoveredVolumeIsTheUnionOfThePieces) {
 
 // ---- output file, grids, labels ----
 
+// One folder per test process, removed at exit.
 std::string tempPath(const std::string& name) {
-    return (fs::temp_directory_path() / ("fluorosim_vox_" + std::to_string(::getpid()) + "_" + name)).string();
+    static const testing::TempDir dir;
+    return dir.file(name).string();
 }
 
 const VdbGridStats& gridNamed(const std::vector<VdbGridStats>& grids, const std::string& name) {
@@ -448,6 +451,19 @@ TEST(Voxelize, RejectsBadOptionsAndInputs) {
     mixed[1].units = "nM";
     expectConfigError([&] { voxelizeNeurons(mixed, options(0.5)); }, "\"nM\"");
     expectConfigError([&] { voxelizeNeurons({}, options(0.5)); }, "no neurons");
+}
+
+TEST(Voxelize, BlocksBeyondTheMemoryCapAreRefusedWhileCounting) {
+    // A 1 km neurite of radius 0.1 um at 1 um voxels passes the volume check (about 3.8e9 voxels), but
+    // its blocks used to take all memory in registerBlocks before failing with bad_alloc.
+    struct CapGuard {
+        CapGuard() { setMemoryCapBytes(uint64_t(64) << 20); }
+        ~CapGuard() { setMemoryCapBytes(0); }
+    } cap;
+    const Morphology km = parseSwc(swcLine(1, 3, Vec3(0, 0, 0), 0.1, -1) + swcLine(2, 3, Vec3(1e9, 0, 0), 0.1, 1), "km.swc");
+    expectConfigError([&] { voxelizeNeurons({input(km)}, options(1.0)); }, "memory cap of 64 MiB");
+    expectConfigError([&] { voxelizeNeurons({input(km)}, options(1.0)); }, "km.swc");
+    EXPECT_NO_THROW(voxelizeNeurons({input(syntheticNeuron())}, options(0.5)));
 }
 
 // ---- the voxelize command ----

@@ -1,0 +1,4 @@
+// libFuzzer entry point for fluorosim::fuzz::spectraCsv (tests/fuzz/fuzz_targets.h).
+#include "fuzz/fuzz_targets.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) { return fluorosim::fuzz::spectraCsv(data, size); }
