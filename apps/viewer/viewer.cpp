@@ -34,20 +34,39 @@ std::string formatValue(double v) {
     return buf;
 }
 
-// The specimen channels named or numbered in --channels, or every channel.
-std::vector<bool> selectedChannels(const std::vector<std::string>& selection, const std::vector<ChannelState>& channels) {
+// Which channels `--channels` shows: names or 1-based numbers. A name may name a dye (specimen
+// channel), a channel of the stack, or both; one that names neither is an error.
+std::vector<bool> selectChannels(const std::vector<std::string>& selection, const std::vector<ChannelState>& channels) {
     if (selection.empty()) return std::vector<bool>(channels.size(), true);
     std::vector<bool> on(channels.size(), false);
+    for (const std::string& s : selection)
+        for (size_t c = 0; c < channels.size(); ++c)
+            if (channels[c].name == s || std::to_string(c + 1) == s) on[c] = true;
+    return on;
+}
+
+void checkChannelSelection(const std::vector<std::string>& selection, const std::vector<ChannelState>& specimen,
+                           const std::vector<ChannelState>& stack) {
     for (const std::string& s : selection) {
         bool found = false;
-        for (size_t c = 0; c < channels.size(); ++c)
-            if (channels[c].name == s || std::to_string(c + 1) == s) on[c] = found = true;
+        for (const auto* list : {&specimen, &stack})
+            for (size_t c = 0; c < list->size(); ++c) found = found || (*list)[c].name == s || std::to_string(c + 1) == s;
         if (found) continue;
+        std::vector<std::string> listed;
         std::string names;
-        for (size_t c = 0; c < channels.size(); ++c) names += (c ? ", " : "") + channels[c].name;
+        for (const auto* list : {&specimen, &stack})
+            for (const ChannelState& ch : *list)
+                if (std::find(listed.begin(), listed.end(), ch.name) == listed.end()) listed.push_back(ch.name);
+        for (const std::string& n : listed) names += (names.empty() ? "" : ", ") + n;
         throw ConfigError("--channels: no channel \"" + s + "\" (channels: " + (names.empty() ? "none" : names) + ")");
     }
-    return on;
+}
+
+// The first shown channel (0 when none is).
+int firstVisible(const std::vector<ChannelState>& channels) {
+    for (size_t c = 0; c < channels.size(); ++c)
+        if (channels[c].visible) return static_cast<int>(c);
+    return 0;
 }
 
 }  // namespace
@@ -175,8 +194,9 @@ void Viewer::Impl::initChannels() {
     if (options.colours.size() > specimenChannels.size() && !specimenChannels.empty())
         throw ConfigError("--colors: " + std::to_string(options.colours.size()) + " colours for " + std::to_string(specimenChannels.size()) +
                           " channels");
-    const std::vector<bool> on = selectedChannels(options.channels, specimenChannels);
+    const std::vector<bool> on = selectChannels(options.channels, specimenChannels);
     for (size_t c = 0; c < specimenChannels.size(); ++c) specimenChannels[c].visible = on[c];
+    activeSpecimenChannel = firstVisible(specimenChannels);
     if (volume)
         for (int k = 0; k < volume->components(); ++k) {
             // Auto contrast: black at 0, white at the 99.5th percentile of the non-zero voxels.
@@ -218,6 +238,11 @@ void Viewer::Impl::initChannels() {
             if (s.high <= s.low) s.high = s.low + 1;
             stackChannels.push_back(s);
         }
+    // --channels applies to the stack's channels too (by their names or numbers).
+    const std::vector<bool> stackOn = selectChannels(options.channels, stackChannels);
+    for (size_t c = 0; c < stackChannels.size(); ++c) stackChannels[c].visible = stackOn[c];
+    activeStackChannel = firstVisible(stackChannels);
+    checkChannelSelection(options.channels, specimenChannels, stackChannels);
     plane = std::clamp(options.plane.value_or(planeCount() / 2), 0, std::max(0, planeCount() - 1));
     if (options.plane && *options.plane >= planeCount())
         throw ConfigError("--plane: the scene has " + std::to_string(planeCount()) + " planes (0 to " + std::to_string(planeCount() - 1) +

@@ -290,6 +290,35 @@ TEST(ViewerRender, ComparePickReadsTheStackInCameraOrientation) {
     }
 }
 
+TEST(ViewerRender, ChannelSelectionAppliesToTheStackToo) {
+    TempDir dir;
+    ViewerScene scene(dir);
+    scene.scene()["microscope"]["channels"].push_back(json{{"name", "AF594"}, {"emission_filter", "semrock_FF01-609-54"}, {"lights", {0}}});
+    scene.write();
+    viewer::ViewerOptions o = scene.options(480, 360);
+    // AF488: a flat 50 everywhere (it would paint the whole panel green); AF594: the magenta blob.
+    o.stack = scene.writeStack("two.expected.ome.tif", kDetectorPixels, kDetectorPixels, kPlanes, kPixelUm, {"AF488", "AF594"},
+                               [](int c, int z, int x, int y) {
+                                   const double px = kFocusUm.x + (x + 0.5 - 32) * kPixelUm, py = kFocusUm.y + (32 - y - 0.5) * kPixelUm;
+                                   return c == 0 ? 50.0 : 100 * kMagentaBlob.at(px, py, kFocusUm.z + kStepUm * (z - 2));
+                               });
+    o.view = ViewPreset::Compare;
+    o.channels = {"AF594"};
+    Viewer v(o);
+    ASSERT_EQ(v.channels().size(), 2u);
+    EXPECT_FALSE(v.channels()[0].visible);
+    EXPECT_TRUE(v.channels()[1].visible);
+    EXPECT_EQ(v.activeChannel(), 1);
+    v.render();
+    const viewer::FrameImage f = v.capture();
+    // The blob's pixel: column (28 - 20) / p + 31.5, row 31.5 - (20 - 18) / p, drawn at ((col + 0.5) p, (63 - row + 0.5) p).
+    const double col = (kMagentaBlob.centre[0] - kFocusUm.x) / kPixelUm + 31.5, row = 31.5 - (kMagentaBlob.centre[1] - kFocusUm.y) / kPixelUm;
+    const auto blob = displayPixel(v, ViewPreset::Compare, Vec3((col + 0.5) * kPixelUm, (63 - row + 0.5) * kPixelUm, 0));
+    const auto corner = displayPixel(v, ViewPreset::Compare, Vec3(2.5 * kPixelUm, 2.5 * kPixelUm, 0));
+    EXPECT_TRUE(isMagenta(f.at(blob[0], blob[1]))) << rgbText(f.at(blob[0], blob[1]));
+    EXPECT_TRUE(isDark(f.at(corner[0], corner[1]))) << "hidden AF488 shows: " << rgbText(f.at(corner[0], corner[1]));
+}
+
 TEST(ViewerRender, ExrCompositeAndBands) {
     TempDir dir;
     // Left half: only 450 nm (and blue in RGB); right half: only 650 nm (red); 550 nm dim everywhere.
