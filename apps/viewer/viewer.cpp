@@ -375,6 +375,13 @@ Viewer::Viewer(const ViewerOptions& options) {
 Viewer::~Viewer() = default;
 
 void Viewer::render() { impl_->renderAll(); }
+void Viewer::renderInteractive() {
+    // What vtkInteractorStyle does while a drag lasts: the window asks for the interactor's desired
+    // rate (15 frames per second), and the volume mappers coarsen their sampling to meet it.
+    impl_->window->SetDesiredUpdateRate(impl_->interactor->GetDesiredUpdateRate());
+    impl_->renderAll();
+    impl_->window->SetDesiredUpdateRate(impl_->interactor->GetStillUpdateRate());
+}
 FrameImage Viewer::capture() { return impl_->capture(); }
 void Viewer::saveScreenshot(const fs::path& png) { impl_->writeScreenshot(png); }
 void Viewer::writeMovie(const fs::path& out, MovieKind kind, int frames) { impl_->writeMovie(out, kind, frames); }

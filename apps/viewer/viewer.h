@@ -111,6 +111,7 @@ public:
     Viewer& operator=(const Viewer&) = delete;
 
     void render();                       // one full-quality frame
+    void renderInteractive();            // one frame at the interactive rate, as while the 3D view is dragged
     FrameImage capture();                // the last frame
     void saveScreenshot(const std::filesystem::path& png);
     void writeMovie(const std::filesystem::path& out, MovieKind kind, int frames);
