@@ -5,7 +5,7 @@
 # Usage: xvfb-launch.sh COMMAND [ARG...]; exits with the command's exit code.
 set -uo pipefail
 number=$(mktemp)
-Xvfb -displayfd 3 -screen 0 1280x1024x24 -nolisten tcp 3>"$number" 2>/dev/null &
+Xvfb -displayfd 3 -screen 0 1280x1024x24 -nolisten tcp -noreset 3>"$number" 2>/dev/null &
 server=$!
 for _ in $(seq 100); do
   [[ -s "$number" ]] && break
