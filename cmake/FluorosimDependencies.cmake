@@ -17,6 +17,15 @@ find_package(TIFF REQUIRED)
 find_package(CLI11 CONFIG REQUIRED)
 find_package(nlohmann_json 3 REQUIRED)
 find_package(assimp REQUIRED)
+if(FLUOROSIM_WITH_VIEWER)
+  # Debian's VTK 9.1 (libvtk9-dev). Only apps/viewer links it. Its config loads TBB through TBB's own
+  # config, which is already loaded above, so the targets are not defined twice.
+  find_package(VTK 9.1 REQUIRED COMPONENTS
+    CommonCore CommonDataModel CommonColor FiltersCore FiltersGeneral FiltersModeling FiltersSources
+    ImagingCore IOImage IOOggTheora InteractionStyle InteractionWidgets RenderingCore RenderingOpenGL2
+    RenderingVolume RenderingVolumeOpenGL2 RenderingAnnotation RenderingFreeType RenderingImage)
+  find_package(X11 REQUIRED)
+endif()
 if(FLUOROSIM_BUILD_TESTS)
   find_package(GTest REQUIRED)
 endif()

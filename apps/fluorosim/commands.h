@@ -18,5 +18,9 @@ void addVoxelizeCommand(CLI::App& app);
 void addFluorescenceValidations(CLI::App& validate);
 // `validate lightsheet`.
 void addLightSheetValidation(CLI::App& validate);
+#ifdef FLUOROSIM_WITH_VIEWER
+// `view`: the VTK viewer (built with the CMake option FLUOROSIM_WITH_VIEWER).
+void addViewCommand(CLI::App& app);
+#endif
 
 }  // namespace fluorosim::app

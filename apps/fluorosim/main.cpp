@@ -74,6 +74,9 @@ int main(int argc, char** argv) {
     fluorosim::app::addAcquireCommand(app);
     fluorosim::app::addValidateCommands(app);
     fluorosim::app::addVoxelizeCommand(app);
+#ifdef FLUOROSIM_WITH_VIEWER
+    fluorosim::app::addViewCommand(app);
+#endif
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
