@@ -19,8 +19,10 @@
 // input, a file missing on one node), every rank throws the failure of the lowest failing rank, with
 // its type and message ("rank 2 of 4: ..." when it was not the root), and main prints it once, on the
 // root. A worker's exception during a farm is rethrown on the root the same way; main then prints it
-// and ends the whole run (abortRun). A rank killed outright is mpirun's to report: it terminates the
-// others, and the root's checkpoint keeps every result collected so far.
+// and ends the whole run (abortRun). A rank killed outright is mpirun's to report: it names the rank
+// and sends SIGTERM to the others, upon which the root stops its farm without waiting for the dead
+// rank, and the command ends the run as it ends an interrupted one (acquire writes its complete planes
+// and keeps every collected plane in its checkpoint for --resume).
 #include <atomic>
 #include <cstdint>
 #include <exception>
@@ -68,8 +70,10 @@ struct TaskFarm {
     std::atomic<bool>* cancelLocal = nullptr;
 };
 
-// Root: runs `tasks` (handed out in this order) and returns once every task handed out is collected.
-// Alone, runs them in order on the calling thread.
+// Root: runs `tasks` (handed out in this order) and returns once every task handed out is collected,
+// or, once stopped early, as soon as the root's own task has ended: tasks still out on other ranks are
+// then abandoned, no farm may follow, releaseWorkers does nothing and workersWaiting stays true, so
+// the run must end through abortRun. Alone, runs them in order on the calling thread.
 void runTaskFarm(const std::vector<uint64_t>& tasks, const TaskFarm& farm);
 // Root: tells the other ranks that no farm follows. Safe to call when alone or more than once.
 void releaseWorkers();

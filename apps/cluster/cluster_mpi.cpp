@@ -30,6 +30,7 @@ enum Tag : int { kReady = 1, kResult = 2, kFailed = 3, kTask = 4, kEnd = 5 };
 enum class Kind : char { Config = 'C', Io = 'I', Numeric = 'N', Other = 'E', Internal = 'X' };
 
 bool gStarted = false, gAgreed = false, gWorkersWaiting = false;
+bool gAbandoned = false;  // root: a farm stopped with tasks still out on other ranks
 int gRank = 0, gSize = 1, gOnNode = 1;
 std::vector<int> gParked;  // root: workers waiting for a task
 int gCheckedIn = 0;        // root: workers that have sent kReady
@@ -218,10 +219,13 @@ struct LocalWorker {
 
 void runTaskFarm(const std::vector<uint64_t>& tasks, const TaskFarm& farm) {
     if (gSize == 1) return detail::runHere(tasks, farm);
+    if (gAbandoned) throw Error("internal: a task farm after one that stopped early (the run can only be ended)");
     if (!gAgreed) agree();
     LocalWorker local(tasks);
     size_t collected = 0;
+    bool stopped = false;
     const auto stopEarly = [&] {
+        stopped = true;
         {
             const std::lock_guard<std::mutex> lock(local.mutex);
             local.stopped = true;
@@ -267,6 +271,13 @@ void runTaskFarm(const std::vector<uint64_t>& tasks, const TaskFarm& farm) {
             {
                 const std::lock_guard<std::mutex> lock(local.mutex);
                 if (local.finished && collected == local.handedOut) break;
+                // Stopped: the tasks still out on other ranks are not awaited. A signal reaches every
+                // rank, so they are cancelled anyway; and when a rank has died (mpirun then signals the
+                // others), its task would never come back.
+                if (local.finished && stopped && local.outcomes.empty()) {
+                    gAbandoned = true;
+                    break;
+                }
             }
             pause();
         }
@@ -281,7 +292,7 @@ void runTaskFarm(const std::vector<uint64_t>& tasks, const TaskFarm& farm) {
 }
 
 void releaseWorkers() {
-    if (gSize == 1 || gRank != 0 || !gWorkersWaiting) return;
+    if (gSize == 1 || gRank != 0 || !gWorkersWaiting || gAbandoned) return;
     while (gCheckedIn < gSize - 1 || static_cast<int>(gParked.size()) < gSize - 1) parkNextWorker();
     for (const int worker : std::exchange(gParked, {})) sendBytes(std::string(), worker, kEnd);
     gWorkersWaiting = false;
