@@ -44,10 +44,10 @@ int run(int argc, char** argv) {
     app::addValidateCommands(app);
     app::addVoxelizeCommand(app);
     for (CLI::App* command : app.get_subcommands([](CLI::App*) { return true; }))
-        if (command->get_name() != "acquire")
+        if (command->get_name() != "acquire" && command->get_name() != "render")
             command->preparse_callback([name = command->get_name()](size_t) {
                 if (cluster::size() > 1)
-                    throw ConfigError(name + " runs in one process; start it without mpirun (acquire distributes over MPI ranks)");
+                    throw ConfigError(name + " runs in one process; start it without mpirun (acquire and render distribute over MPI ranks)");
             });
     try {
         app.parse(argc, argv);

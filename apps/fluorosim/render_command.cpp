@@ -10,9 +10,11 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cluster.h"
 #include "commands.h"
 #include "core/errors.h"
 #include "database.h"
+#include "distributed_render.h"
 #include "io/image_io.h"
 #include "output_checks.h"
 #include "progress.h"
@@ -87,10 +89,11 @@ double nullPerReal(const PathStats& st) {
 void runRender(const RenderArgs& a) {
     const fs::path out = a.output;
     if (!(a.checkpointSeconds > 0)) throw ConfigError("--checkpoint-seconds: must be positive, got " + std::to_string(a.checkpointSeconds));
-    checkWritable(out);
+    if (cluster::isRoot()) checkWritable(out);  // under MPI only the root writes
     const spectra::Database db;
     Scene scene = loadSceneFile(a.scene, db);
-    for (const std::string& w : scene.warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
+    if (cluster::isRoot())
+        for (const std::string& w : scene.warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
     if (a.seed) scene.render.seed = *a.seed;
     if (!a.fluorescence.empty()) {
         const auto model = fluorescenceModelFromName(a.fluorescence);
@@ -107,6 +110,9 @@ void runRender(const RenderArgs& a) {
     opt.cancel = &gCancel;
     Film film(scene.camera.width, scene.camera.height, scene.spectral.lambdaMin, scene.spectral.lambdaMax, scene.spectral.binWidth, db.cie1931(),
               FluorescencePlan(scene).active());
+    std::signal(SIGINT, onSignal);
+    std::signal(SIGTERM, onSignal);
+    if (!cluster::isRoot()) return serveBands(scene, film, opt);  // MPI: render the bands rank 0 hands out
     ProgressBar bar("render");
     opt.progress = [&](double f) { bar.update(f); };
     auto lastCheckpoint = std::chrono::steady_clock::now();
@@ -117,10 +123,10 @@ void runRender(const RenderArgs& a) {
             lastCheckpoint = now;
         }
     };
-    std::signal(SIGINT, onSignal);
-    std::signal(SIGTERM, onSignal);
-    const RenderSummary s = render(scene, film, opt);
+    const RenderSummary s = renderOnCluster(scene, film, opt);
     bar.finish();
+    if (s.sppCompleted == 0 && cluster::size() > 1)
+        throw Interrupted("render interrupted; under mpirun the image is written only once every band is done, so nothing was written");
     if (s.sppCompleted == 0) throw Error("interrupted before the first pass finished; nothing written");
     const fs::path png = writeOutputs(out, film, scene, s.sppCompleted, &s, a.preview);
     const double bounces = static_cast<double>(s.stats.scatteringEvents + s.stats.surfaceBounces) / std::max<double>(1.0, static_cast<double>(s.stats.paths));

@@ -30,7 +30,10 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
     const WavelengthSampler wavelengths = cameraWavelengthSampler(scene, tracer.fluorescence().active());
 
     const Camera& cam = scene.camera;
-    const int rows = cam.height;
+    const int rows = film.height();
+    if (film.width() != cam.width || options.firstRow < 0 || options.firstRow + rows > cam.height)
+        throw Error("a film of " + std::to_string(film.width()) + "x" + std::to_string(rows) + " from row " + std::to_string(options.firstRow) +
+                    " does not fit the camera's " + std::to_string(cam.width) + "x" + std::to_string(cam.height) + " image");
     RenderSummary summary;
     std::vector<PathStats> rowStats(static_cast<size_t>(rows));
     std::mutex progressMutex;
@@ -44,7 +47,7 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
         }
         const int passEnd = std::min(options.spp, passStart + options.sppPerPass);
         parallelFor(static_cast<size_t>(rows), options.threads, [&](size_t row) {
-            const int y = static_cast<int>(row);
+            const int y = options.firstRow + static_cast<int>(row);
             PathStats& stats = rowStats[row];
             for (int x = 0; x < cam.width; ++x) {
                 const uint64_t pixel = static_cast<uint64_t>(y) * static_cast<uint64_t>(cam.width) + static_cast<uint64_t>(x);
@@ -52,7 +55,7 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
                     Rng rng = Rng::forKey(options.seed, pixel, static_cast<uint64_t>(s));
                     const SampledWavelengths wl = wavelengths.sample(rng.uniform(), rng.uniform());
                     const Ray ray = cameraRay(cam, x, y, rng.uniform(), rng.uniform());
-                    film.addSample(x, y, tracer.radiance(ray, cam.medium, wl, rng, stats), wl);
+                    film.addSample(x, static_cast<int>(row), tracer.radiance(ray, cam.medium, wl, rng, stats), wl);
                 }
             }
             if (options.progress) {

@@ -15,6 +15,9 @@ struct RenderOptions {
     int threads = 0;        // 0 = all cores
     uint64_t seed = 1;
     int sppPerPass = 1;     // granularity of cancellation and checkpoints
+    // The film holds camera rows [firstRow, firstRow + film height): a band of the image rendered apart
+    // (distributed renders). Its samples are those of the whole image's render, keyed by absolute pixel.
+    int firstRow = 0;
     const std::atomic<bool>* cancel = nullptr;
     std::function<void(double fractionDone)> progress;            // called from one thread at a time
     std::function<void(const Film&, int sppDone)> passFinished;   // e.g. checkpoint writing

@@ -1,7 +1,7 @@
-// `mpirun -np N fluorosim acquire` (apps/cluster, apps/fluorosim/distributed_acquire): the stack is
-// byte for byte the single process's for N = 2 and 3; bad input is one error line from the root; a rank
-// killed mid-run ends the run with mpirun's report of that rank and the root's interruption message,
-// and --resume completes the stack to the single process's bytes.
+// `mpirun -np N fluorosim acquire|render` (apps/cluster, apps/fluorosim/distributed_*): the stack and
+// the image are byte for byte the single process's for N = 2 and 3; bad input is one error line from
+// the root; a rank killed mid-acquisition ends the run with mpirun's report of that rank and the root's
+// interruption message, and --resume completes the stack to the single process's bytes.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <unistd.h>
@@ -92,10 +92,40 @@ TEST(DistributedAcquire, BadInputIsOneErrorFromTheRoot) {
     EXPECT_EQ(r.exitCode, 3);
     ASSERT_EQ(fluorosimLines(r.err).size(), 1u) << r.err;
     EXPECT_TRUE(contains(fluorosimLines(r.err)[0], "missing.json")) << r.err;
-    r = runCliUnder(dir, mpirun(2), {"render", scene.string(), "-o", (dir.path() / "x.exr").string()});
+    r = runCliUnder(dir, mpirun(2), {"voxelize", scene.string(), "-o", (dir.path() / "x.vdb").string()});
     EXPECT_EQ(r.exitCode, 2);
     ASSERT_EQ(fluorosimLines(r.err).size(), 1u) << r.err;
-    EXPECT_TRUE(contains(fluorosimLines(r.err)[0], "render runs in one process")) << r.err;
+    EXPECT_TRUE(contains(fluorosimLines(r.err)[0], "voxelize runs in one process")) << r.err;
+}
+
+// The fluorescent spheres (elastic and fluorescent layers) at 40 x 30 pixels: 30 rows make bands of
+// one row at 2 and 3 ranks, so bands of every rank interleave.
+TEST(DistributedRender, AnyNumberOfRanksWritesTheSameBytes) {
+    TempDir dir;
+    const fs::path sample = fs::path(FLUOROSIM_SOURCE_DIR) / "samples" / "fluorescence" / "spheres.json";
+    json j = json::parse(readFile(sample));
+    j["camera"]["resolution"] = {40, 30};
+    const fs::path scene = dir.write("spheres.json", j.dump());
+    const std::vector<std::string> options{"--spp", "3", "--seed", "5", "--threads", "1"};
+    auto args = [&](const std::string& name) {
+        std::vector<std::string> a{"render", scene.string(), "-o", (dir.path() / (name + ".exr")).string()};
+        a.insert(a.end(), options.begin(), options.end());
+        return a;
+    };
+    const auto one = runCli(dir, args("one"), 300);
+    ASSERT_EQ(one.exitCode, 0) << one.err;
+    for (int ranks : {2, 3}) {
+        SCOPED_TRACE(ranks);
+        const std::string name = "ranks" + std::to_string(ranks);
+        const auto r = runCliUnder(dir, mpirun(ranks), args(name), 300);
+        ASSERT_EQ(r.exitCode, 0) << r.err;
+        EXPECT_EQ(json::parse(r.out)["spp"], 3);
+        for (const char* ext : {".exr", ".png"}) {
+            const std::string a = readFile(dir.path() / ("one" + std::string(ext))), b = readFile(dir.path() / (name + ext));
+            EXPECT_FALSE(a.empty());
+            EXPECT_TRUE(a == b) << ext << " differs";
+        }
+    }
 }
 
 // Waits for `condition`; the limit only keeps a broken build from hanging the suite.
