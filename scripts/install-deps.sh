@@ -6,6 +6,7 @@ packages=(
   libtbb-dev libopenvdb-dev libnanovdb-dev libboost-iostreams-dev libboost-dev
   libembree-dev libopenexr-dev libimath-dev libpng-dev libtiff-dev libassimp-dev
   libcli11-dev nlohmann-json3-dev libgtest-dev libbenchmark-dev
+  libopenmpi-dev openmpi-bin
 )
 if [[ "${1:-}" == "--docs" ]]; then packages+=(python3 python3-matplotlib python3-numpy); fi
 missing=()
