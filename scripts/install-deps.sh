@@ -7,6 +7,7 @@ packages=(
   libembree-dev libopenexr-dev libimath-dev libpng-dev libtiff-dev libassimp-dev
   libcli11-dev nlohmann-json3-dev libgtest-dev libbenchmark-dev
   libopenmpi-dev openmpi-bin
+  pybind11-dev python3-dev python3-numpy python3-pytest python3-tifffile
 )
 if [[ "${1:-}" == "--docs" ]]; then packages+=(python3 python3-matplotlib python3-numpy); fi
 missing=()
