@@ -9,6 +9,8 @@ packages=(
   # The viewer (FLUOROSIM_WITH_VIEWER, docs/viewer.md): VTK 9.1 and X11 headers; its tests render
   # under a virtual X server (xvfb-run needs xauth) through Mesa's llvmpipe (libgl1-mesa-dri).
   libvtk9-dev libx11-dev xvfb xauth libgl1-mesa-dri
+  libopenmpi-dev openmpi-bin
+  pybind11-dev python3-dev python3-numpy python3-pytest python3-tifffile
 )
 if [[ "${1:-}" == "--docs" ]]; then packages+=(python3 python3-matplotlib python3-numpy); fi
 # The libFuzzer harnesses (scripts/fuzz.sh) need clang and its runtime; the normal build does not.

@@ -12,9 +12,11 @@
 #include <optional>
 #include <sstream>
 
+#include "cluster.h"
 #include "commands.h"
 #include "core/errors.h"
 #include "core/units.h"
+#include "distributed_acquire.h"
 #include "optics/acquisition.h"
 #include "optics/stack_files.h"
 #include "output_checks.h"
@@ -65,9 +67,11 @@ void runAcquire(const AcquireArgs& a) {
     if (a.seed && *a.seed < 0) throw ConfigError("--seed: must be >= 0, got " + std::to_string(*a.seed));
     const spectra::Database db;
     const Scene scene = loadSceneFile(a.scene, db);
-    for (const std::string& w : scene.warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
+    if (cluster::isRoot())  // under MPI every rank loads the scene; one of them speaks
+        for (const std::string& w : scene.warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
     optics::Microscope m = optics::Microscope::fromScene(scene, db);
-    for (const std::string& w : m.warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
+    if (cluster::isRoot())
+        for (const std::string& w : m.warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
     if (a.planes) {
         if (*a.planes < 1 || *a.planes > 4096) throw ConfigError("--planes: must lie in [1, 4096], got " + std::to_string(*a.planes));
         m.stack.planes = *a.planes;
@@ -101,6 +105,11 @@ void runAcquire(const AcquireArgs& a) {
     }
     if (selected.empty())
         for (size_t c = 0; c < m.channels.size(); ++c) selected.push_back(c);
+    if (!cluster::isRoot()) {  // MPI: the other ranks render the planes that rank 0 hands out
+        std::signal(SIGINT, onAcquireSignal);
+        std::signal(SIGTERM, onAcquireSignal);
+        return servePlanes(scene, m, o);
+    }
 
     const optics::StackOutputs out = optics::StackOutputs::forStack(a.output);
     requireWritableFolder(out.counts);
@@ -151,7 +160,7 @@ void runAcquire(const AcquireArgs& a) {
             std::fprintf(stderr, "fluorosim: warning: channel \"%s\", plane %d: no signal (the sheet or the focal plane misses the labelled volume)\n",
                          m.channels[stack.channels[slot]].name.c_str(), plane);
     };
-    const bool finished = optics::acquireStack(scene, m, stack, o, cb);
+    const bool finished = acquireStackOnCluster(scene, m, stack, o, cb);
     bar.finish();
 
     const int planes = stack.completePlanes();
@@ -186,6 +195,7 @@ void runAcquire(const AcquireArgs& a) {
                                     {"median_direct_relative_stderr_top10", median(directRel)},
                                     {"median_path_relative_stderr_top10", median(pathRel)},
                                     {"seed", o.seed},
+                                    {"ranks", cluster::size()},
                                     {"seconds", seconds},
                                     {"paths", stats.paths},
                                     {"mean_path_vertices", vertices},

@@ -9,12 +9,14 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_checks.h"
+#include "cluster.h"
 #include "commands.h"
 #include "interruption.h"
 #include "core/errors.h"
 #include "core/memory_cap.h"
 #include "core/message.h"
 #include "database.h"
+#include "distributed_render.h"
 #include "io/image_io.h"
 #include "output_checks.h"
 #include "progress.h"
@@ -100,15 +102,18 @@ double nullPerReal(const PathStats& st) {
 void runRender(const RenderArgs& a) {
     const fs::path out = a.output;
     if (!(a.checkpointSeconds > 0)) throw ConfigError("--checkpoint-seconds: must be positive, got " + std::to_string(a.checkpointSeconds));
-    checkWritable(out);
+    if (cluster::isRoot()) checkWritable(out);  // under MPI only the root writes
+    if (a.resume && cluster::size() > 1)
+        throw ConfigError("--resume: continues a render in one process; start it without mpirun");
     const fs::path ckptPath = checkpointPath(out);
     std::error_code ec;
-    if (a.resume && !fs::exists(ckptPath, ec))
+    if (cluster::isRoot() && a.resume && !fs::exists(ckptPath, ec))
         throw IoError(ckptPath.string() + ": no checkpoint to resume (it is written next to the output while a render runs; "
                                           "run without --resume to start afresh)");
     const spectra::Database db;
     Scene scene = loadSceneFile(a.scene, db);
-    for (const std::string& w : scene.warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
+    if (cluster::isRoot())
+        for (const std::string& w : scene.warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
     if (a.seed) scene.render.seed = *a.seed;
     if (!a.fluorescence.empty()) {
         const auto model = fluorescenceModelFromName(a.fluorescence);
@@ -143,7 +148,7 @@ void runRender(const RenderArgs& a) {
         std::fprintf(stderr, "fluorosim: resuming %s at %d of %d spp\n", ckptPath.string().c_str(), prior.sppDone, opt.spp);
     } else {
         opt.spp = a.spp.value_or(scene.render.spp);
-        if (fs::exists(ckptPath, ec))
+        if (cluster::isRoot() && fs::exists(ckptPath, ec))
             std::fprintf(stderr, "fluorosim: warning: %s is left from an interrupted render; this render replaces it (--resume continues it)\n",
                          ckptPath.string().c_str());
     }
@@ -153,6 +158,8 @@ void runRender(const RenderArgs& a) {
     opt.validate();
     // One sample per pixel per pass: checkpoints stay fresh, and a cancelled pass loses little.
     opt.sppPerPass = 1;
+    opt.cancel = &installInterruptHandlers();
+    if (!cluster::isRoot()) return serveBands(scene, film, opt);  // MPI: render the bands rank 0 hands out
     ProgressBar bar("render");
     opt.progress = [&](double f) { bar.update(f); };
     auto lastCheckpoint = std::chrono::steady_clock::now();
@@ -175,9 +182,10 @@ void runRender(const RenderArgs& a) {
             lastCheckpoint = now;
         }
     };
-    opt.cancel = &installInterruptHandlers();
-    RenderSummary s = render(scene, film, opt);
+    RenderSummary s = renderOnCluster(scene, film, opt);
     bar.finish();
+    if (s.sppCompleted == 0 && cluster::size() > 1)
+        throw Interrupted("render interrupted; under mpirun the image is written only once every band is done, so nothing was written");
     if (s.sppCompleted == 0) throw Error("interrupted before the first pass finished; nothing written");
     fs::path png;
     if (s.cancelled) {

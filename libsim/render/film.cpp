@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <numeric>
 #include <array>
 #include <istream>
@@ -15,7 +16,7 @@ namespace fluorosim {
 
 Film::Film(int width, int height, double lambdaMin, double lambdaMax, double binWidth, ColorMatchingFunctions cmf,
            bool separateComponents)
-    : width_(width), height_(height), lambdaMin_(lambdaMin), binWidth_(binWidth), separate_(separateComponents), cmf_(std::move(cmf)) {
+    : width_(width), height_(height), lambdaMin_(lambdaMin), lambdaMax_(lambdaMax), binWidth_(binWidth), separate_(separateComponents), cmf_(std::move(cmf)) {
     if (width <= 0 || height <= 0 || static_cast<int64_t>(width) * height > (int64_t(1) << 26))
         throw ConfigError("film resolution must be positive and at most 2^26 pixels, got " + std::to_string(width) + "x" +
                           std::to_string(height));
@@ -207,6 +208,47 @@ double Film::meanLuminance(int spp) const {
     for (const auto& xyz : xyz_)
         for (size_t p = 1; p < xyz.size(); p += 3) sum += xyz[p];
     return spp > 0 ? sum / spp / (static_cast<double>(width_) * height_) : 0.0;
+}
+
+Film Film::band(int rows) const { return Film(width_, rows, lambdaMin_, lambdaMax_, binWidth_, cmf_, separate_); }
+
+void Film::placeRows(int firstRow, const Film& band) {
+    if (band.width_ != width_ || band.binCount() != binCount() || band.separate_ != separate_ || firstRow < 0 ||
+        firstRow + band.height_ > height_)
+        throw Error("a film band of " + std::to_string(band.width_) + "x" + std::to_string(band.height_) + " at row " +
+                    std::to_string(firstRow) + " does not fit a film of " + std::to_string(width_) + "x" + std::to_string(height_));
+    const size_t first = static_cast<size_t>(firstRow) * static_cast<size_t>(width_), bins = static_cast<size_t>(binCount());
+    for (int c = 0; c < 2; ++c) {
+        std::copy(band.xyz_[c].begin(), band.xyz_[c].end(), xyz_[c].begin() + static_cast<std::ptrdiff_t>(3 * first));
+        std::copy(band.spectral_[c].begin(), band.spectral_[c].end(), spectral_[c].begin() + static_cast<std::ptrdiff_t>(bins * first));
+    }
+    std::copy(band.nonFinite_.begin(), band.nonFinite_.end(), nonFinite_.begin() + static_cast<std::ptrdiff_t>(first));
+}
+
+std::string Film::sums() const {
+    std::string bytes;
+    const auto append = [&](const auto& v) {
+        bytes.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(v[0]));
+    };
+    for (int c = 0; c < 2; ++c) append(xyz_[c]);
+    for (int c = 0; c < 2; ++c) append(spectral_[c]);
+    append(nonFinite_);
+    return bytes;
+}
+
+void Film::setSums(std::string_view bytes) {
+    size_t expected = nonFinite_.size() * sizeof(uint32_t);
+    for (int c = 0; c < 2; ++c) expected += (xyz_[c].size() + spectral_[c].size()) * sizeof(double);
+    if (bytes.size() != expected)
+        throw Error("film sums of " + std::to_string(bytes.size()) + " bytes for a film that needs " + std::to_string(expected));
+    size_t at = 0;
+    const auto take = [&](auto& v) {
+        std::memcpy(v.data(), bytes.data() + at, v.size() * sizeof(v[0]));
+        at += v.size() * sizeof(v[0]);
+    };
+    for (int c = 0; c < 2; ++c) take(xyz_[c]);
+    for (int c = 0; c < 2; ++c) take(spectral_[c]);
+    take(nonFinite_);
 }
 
 }  // namespace fluorosim

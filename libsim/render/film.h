@@ -6,6 +6,8 @@
 #include <array>
 #include <cstdint>
 #include <iosfwd>
+#include <string>
+#include <string_view>
 #include <vector>
 
 #include "io/image_io.h"
@@ -55,12 +57,21 @@ public:
     void writeState(std::ostream& out) const;
     void readState(std::istream& in);
 
+    // An empty film like this one (width, bins, layers) with `rows` rows: a band of the image.
+    Film band(int rows) const;
+    // A band of this image rendered elsewhere (RenderOptions::firstRow): `band` has this film's width
+    // and bins, and its sums become rows [firstRow, firstRow + band.height()) here, exactly.
+    void placeRows(int firstRow, const Film& band);
+    // The film's sums as bytes and back (same dimensions), so that a band can travel between processes.
+    std::string sums() const;
+    void setSums(std::string_view bytes);  // throws Error when the size does not match
+
 private:
     enum Component { kElastic = 0, kFluorescent = 1 };
     void accumulate(double* xyz, double* spectral, const SampledSpectrum& L, const SampledWavelengths& wl) const;
 
     int width_, height_;
-    double lambdaMin_, binWidth_;
+    double lambdaMin_, lambdaMax_, binWidth_;
     bool separate_;
     std::vector<double> binCenters_, binWidths_;
     ColorMatchingFunctions cmf_;

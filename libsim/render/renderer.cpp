@@ -34,7 +34,10 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
     const WavelengthSampler wavelengths = cameraWavelengthSampler(scene, tracer.fluorescence().active());
 
     const Camera& cam = scene.camera;
-    const int rows = cam.height;
+    const int rows = film.height();
+    if (film.width() != cam.width || options.firstRow < 0 || options.firstRow + rows > cam.height)
+        throw Error("a film of " + std::to_string(film.width()) + "x" + std::to_string(rows) + " from row " + std::to_string(options.firstRow) +
+                    " does not fit the camera's " + std::to_string(cam.width) + "x" + std::to_string(cam.height) + " image");
     RenderSummary summary;
     summary.sppCompleted = options.firstSample;
     std::vector<PathStats> rowStats(static_cast<size_t>(rows));
@@ -55,8 +58,8 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
         std::vector<char> done(static_cast<size_t>(rows), 0);
         parallelFor(static_cast<size_t>(rows), options.threads, [&](size_t row) {
             if (cancelled()) return;
-            const int y = static_cast<int>(row);
-            Film::Row r = film.row(y);
+            const int y = options.firstRow + static_cast<int>(row);
+            Film::Row r = film.row(static_cast<int>(row));
             PathStats stats = rowStats[row];
             for (int x = 0; x < cam.width; ++x) {
                 if (cancelled()) return;

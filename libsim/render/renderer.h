@@ -18,6 +18,9 @@ struct RenderOptions {
     // Samples per pixel the film already holds (a resumed checkpoint): passes start there, and the
     // image equals an uninterrupted render of `spp` samples bit for bit.
     int firstSample = 0;
+    // The film holds camera rows [firstRow, firstRow + film height): a band of the image rendered apart
+    // (distributed renders). Its samples are those of the whole image's render, keyed by absolute pixel.
+    int firstRow = 0;
     // Checked between pixels: a set flag abandons the pass in progress within about one path per
     // thread, and the film keeps its last finished pass.
     const std::atomic<bool>* cancel = nullptr;

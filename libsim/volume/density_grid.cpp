@@ -2,8 +2,6 @@
 
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
-#include <nanovdb/util/OpenToNanoVDB.h>
-#include <nanovdb/util/SampleFromVoxels.h>
 
 #include <algorithm>
 #include <cmath>
@@ -18,6 +16,7 @@
 #include "core/errors.h"
 #include "core/memory_cap.h"
 #include "core/message.h"
+#include "volume/sparse_voxels.h"
 
 namespace fluorosim {
 
@@ -71,8 +70,7 @@ struct DensityGrid::Impl {
     std::string name, file;
     Affine worldFromIndex;
     GridMetadata metadata;
-    nanovdb::GridHandle<nanovdb::HostBuffer> handle;
-    const nanovdb::FloatGrid* grid = nullptr;
+    SparseVoxels voxels;
     std::vector<std::pair<IndexBox, double>> blocks;
     IndexBox bounds;
     double background = 0, maxValue = 0;
@@ -261,6 +259,7 @@ DensityGrid fromOpenVdb(std::shared_ptr<DensityGrid::Impl> impl, const openvdb::
     impl->background = tree.background();
     if (!std::isfinite(impl->background) || impl->background < 0)
         throw ConfigError(where + " has background value " + std::to_string(impl->background) + "; it must be finite and >= 0");
+    impl->voxels = SparseVoxels(tree.background());
     impl->maxValue = impl->background;
     for (auto it = tree.cbeginValueAll(); it; ++it) {
         const float v = *it;
@@ -268,17 +267,28 @@ DensityGrid fromOpenVdb(std::shared_ptr<DensityGrid::Impl> impl, const openvdb::
             throw ConfigError(where + " has value " + std::to_string(v) + " at voxel " + coordText(it.getCoord()) +
                               "; values must be finite and >= 0");
         impl->maxValue = std::max(impl->maxValue, double(v));
-        if (!it.isVoxelValue() && v > impl->background) {
+        if (!it.isVoxelValue() && v != impl->background) {
             openvdb::CoordBBox b;
             it.getBoundingBox(b);
-            impl->blocks.push_back({toIndexBox(b), v});
+            impl->voxels.addUniform(toIndexBox(b), v, where);
+            if (v > impl->background) impl->blocks.push_back({toIndexBox(b), v});
         }
     }
+    static_assert(openvdb::FloatTree::LeafNodeType::SIZE == SparseVoxels::kBlockVoxels);
+    // The sparse copy is at most the size of the OpenVDB tree, which is freed after the conversion.
+    requireMemory(2.0 * static_cast<double>(tree.memUsage()), where + ": holding the grid");
     for (auto leaf = tree.cbeginLeaf(); leaf; ++leaf) {
         float mx = 0;
-        for (openvdb::Index i = 0; i < openvdb::FloatTree::LeafNodeType::SIZE; ++i) mx = std::max(mx, leaf->getValue(i));
+        std::array<float, SparseVoxels::kBlockVoxels> values;
+        for (openvdb::Index i = 0; i < values.size(); ++i) {
+            values[i] = leaf->getValue(i);
+            mx = std::max(mx, values[i]);
+        }
+        const openvdb::Coord o = leaf->origin();
+        impl->voxels.addBlock({o.x(), o.y(), o.z()}, values.data(), where);
         if (mx > impl->background) impl->blocks.push_back({toIndexBox(leaf->getNodeBoundingBox()), mx});
     }
+    impl->voxels.finish();
     for (const auto& [b, v] : impl->blocks) {
         if (impl->bounds.empty()) impl->bounds = b;
         for (int a = 0; a < 3; ++a) {
@@ -287,11 +297,6 @@ DensityGrid fromOpenVdb(std::shared_ptr<DensityGrid::Impl> impl, const openvdb::
         }
     }
     impl->activeVoxels = tree.activeVoxelCount();
-    // The NanoVDB copy is about the size of the OpenVDB tree, which is freed after the conversion.
-    requireMemory(2.0 * static_cast<double>(grid->memUsage()), where + ": holding the grid");
-    impl->handle = nanovdb::openToNanoVDB(*grid);
-    impl->grid = impl->handle.grid<float>();
-    if (!impl->grid) throw Error(where + ": NanoVDB conversion failed");
     return DensityGrid(std::move(impl));
 }
 
@@ -352,13 +357,7 @@ void writeVoxelGrids(const std::string& file, const Affine& worldFromIndex, cons
 }
 
 double DensityGrid::value(const Vec3& p, Interpolation interpolation) const {
-    const auto acc = impl_->grid->getAccessor();
-    if (interpolation == Interpolation::Nearest) {
-        const nanovdb::SampleFromVoxels<decltype(acc), 0, false> s(acc);
-        return s(nanovdb::Vec3d(p.x, p.y, p.z));
-    }
-    const nanovdb::SampleFromVoxels<decltype(acc), 1, false> s(acc);
-    return s(nanovdb::Vec3d(p.x, p.y, p.z));
+    return interpolation == Interpolation::Nearest ? impl_->voxels.nearest(p) : impl_->voxels.trilinear(p);
 }
 
 void DensityGrid::forEachBlock(const std::function<void(const IndexBox&, double)>& callback) const {
@@ -373,6 +372,6 @@ IndexBox DensityGrid::bounds() const { return impl_->bounds; }
 double DensityGrid::background() const { return impl_->background; }
 double DensityGrid::maxValue() const { return impl_->maxValue; }
 uint64_t DensityGrid::activeVoxelCount() const { return impl_->activeVoxels; }
-size_t DensityGrid::memoryBytes() const { return impl_->handle.size() + impl_->blocks.size() * sizeof(impl_->blocks[0]); }
+size_t DensityGrid::memoryBytes() const { return impl_->voxels.memoryBytes() + impl_->blocks.capacity() * sizeof(impl_->blocks[0]); }
 
 }  // namespace fluorosim

@@ -1,6 +1,6 @@
 #pragma once
-// A scalar voxel grid read from an OpenVDB file and held as NanoVDB for rendering (read-only and
-// thread-safe). OpenVDB and NanoVDB appear only in volume/*.cpp; this header exposes project types.
+// A scalar voxel grid read from an OpenVDB file and held sparsely for rendering (volume/sparse_voxels.h; read-only and
+// thread-safe). OpenVDB appears only in volume/*.cpp; this header exposes project types.
 // Index space follows OpenVDB: voxel centres at integer coordinates.
 #include <array>
 #include <cstdint>
@@ -66,9 +66,9 @@ public:
     double background() const;
     double maxValue() const;  // over every stored value, including the background
     uint64_t activeVoxelCount() const;
-    size_t memoryBytes() const;  // the NanoVDB buffer
+    size_t memoryBytes() const;  // the voxel store and the block list
 
-    struct Impl;  // opaque: holds the NanoVDB grid
+    struct Impl;  // opaque: holds the voxel store
     explicit DensityGrid(std::shared_ptr<const Impl> impl) : impl_(std::move(impl)) {}
 
 private:

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <unordered_map>
 
 #include "core/errors.h"
 
@@ -84,9 +85,10 @@ VolumeFields::VolumeFields(std::vector<VolumeChannel> channels, const Affine& wo
     if (cellCount * static_cast<double>(channels_.size()) > double(1 << 28))
         throw ConfigError("the majorant grid would have " + std::to_string(static_cast<int64_t>(cellCount)) +
                           " cells; use a larger majorant cell size");
-    cellMax_.resize(static_cast<size_t>(cellCount) * channels_.size());
-    for (size_t i = 0; i < cellMax_.size(); ++i) cellMax_[i] = outside_[i % channels_.size()];
-    for (size_t c = 0; c < channels_.size(); ++c) {
+    const size_t nc = channels_.size();
+    std::vector<double> dense(static_cast<size_t>(cellCount) * nc);
+    for (size_t i = 0; i < dense.size(); ++i) dense[i] = outside_[i % nc];
+    for (size_t c = 0; c < nc; ++c) {
         const VolumeChannel& ch = channels_[c];
         if (!ch.grid) continue;
         ch.grid->forEachBlock([&](const IndexBox& b, double maxValue) {
@@ -101,11 +103,21 @@ VolumeFields::VolumeFields(std::vector<VolumeChannel> channels, const Affine& wo
             for (int k = lo[2]; k <= hi[2]; ++k)
                 for (int j = lo[1]; j <= hi[1]; ++j)
                     for (int i = lo[0]; i <= hi[0]; ++i) {
-                        double& m = cellMax_[((static_cast<size_t>(k) * cells_[1] + j) * cells_[0] + i) * channels_.size() + c];
+                        double& m = dense[((static_cast<size_t>(k) * cells_[1] + j) * cells_[0] + i) * nc + c];
                         m = std::max(m, v);
                     }
         });
     }
+    std::unordered_map<std::string, uint32_t> entries;
+    cellEntry_.resize(static_cast<size_t>(cellCount));
+    for (size_t n = 0; n < cellEntry_.size(); ++n) {
+        const double* m = &dense[n * nc];
+        const auto [it, added] = entries.try_emplace(std::string(reinterpret_cast<const char*>(m), nc * sizeof(double)),
+                                                     static_cast<uint32_t>(entries.size()));
+        if (added) cellMaxima_.insert(cellMaxima_.end(), m, m + nc);
+        cellEntry_[n] = it->second;
+    }
+    cellMaxima_.shrink_to_fit();
 }
 
 void VolumeFields::values(const Vec3& pWorld, double* out) const {
@@ -127,7 +139,7 @@ double VolumeFields::voxelSizeMm() const {
 
 std::vector<double> VolumeFields::channelMaxima() const {
     std::vector<double> m = outside_;
-    for (size_t i = 0; i < cellMax_.size(); ++i) m[i % m.size()] = std::max(m[i % m.size()], cellMax_[i]);
+    for (size_t i = 0; i < cellMaxima_.size(); ++i) m[i % m.size()] = std::max(m[i % m.size()], cellMaxima_[i]);
     return m;
 }
 
@@ -138,7 +150,7 @@ std::vector<double> VolumeFields::channelFloors() const {
 }
 
 size_t VolumeFields::memoryBytes() const {
-    size_t bytes = cellMax_.size() * sizeof(double);
+    size_t bytes = cellMaxima_.size() * sizeof(double) + cellEntry_.size() * sizeof(uint32_t);
     for (const VolumeChannel& c : channels_)
         if (c.grid) bytes += c.grid->memoryBytes();
     return bytes;
@@ -150,7 +162,7 @@ VolumeFields::Traversal VolumeFields::traverse(const Ray& worldRay, double tMin,
     tr.t_ = tMin;
     tr.tEnd_ = tMax;
     tr.tEnter_ = tr.tExit_ = kInf;
-    if (cellMax_.empty()) return tr;  // phase 0 with no domain: one outside segment
+    if (cellEntry_.empty()) return tr;  // phase 0 with no domain: one outside segment
     const Vec3 o = indexFromWorld_.apply(worldRay.o), d = indexFromWorld_.applyLinear(worldRay.d);
     double t0 = tMin, t1 = tMax;
     for (int a = 0; a < 3; ++a) {

@@ -69,8 +69,8 @@ public:
 
 private:
     const double* cellMax(const std::array<int, 3>& c) const {
-        return &cellMax_[(static_cast<size_t>(c[2]) * cells_[1] + c[1]) * cells_[0] * channels_.size() +
-                         static_cast<size_t>(c[0]) * channels_.size()];
+        return &cellMaxima_[cellEntry_[(static_cast<size_t>(c[2]) * cells_[1] + c[1]) * cells_[0] + static_cast<size_t>(c[0])] *
+                            channels_.size()];
     }
 
     std::vector<VolumeChannel> channels_;
@@ -79,7 +79,10 @@ private:
     Vec3 domainLo_, domainHi_;      // index space
     std::array<double, 3> cellSize_{};  // in voxels
     std::array<int, 3> cells_{0, 0, 0};
-    std::vector<double> cellMax_;   // channel-minor
+    // Most cells share their maxima (empty space, one dye's neurite at full concentration), so each
+    // distinct set of channel maxima is stored once (channel-minor) and a cell holds its index.
+    std::vector<double> cellMaxima_;
+    std::vector<uint32_t> cellEntry_;
     std::vector<double> outside_;   // values where every voxel is background
 };
 

@@ -45,11 +45,15 @@ struct RunResult {
     long maxRssKb = 0;
 };
 
-// Runs the CLI with `args`, stdin from /dev/null, stdout and stderr captured to files in `dir`.
-// A generous timeout keeps a misbehaving binary from hanging the test run (exit code 124).
-inline RunResult runCli(const TempDir& dir, const std::vector<std::string>& args, int timeoutSeconds = 120) {
+// Runs the CLI with `args` behind `launcher` (e.g. mpirun and its options; none by default), stdin from
+// /dev/null, stdout and stderr captured to files in `dir`. A generous timeout keeps a misbehaving
+// binary from hanging the test run (exit code 124).
+inline RunResult runCliUnder(const TempDir& dir, const std::vector<std::string>& launcher, const std::vector<std::string>& args,
+                             int timeoutSeconds = 120) {
     const fs::path outFile = dir.path() / "stdout.txt", errFile = dir.path() / "stderr.txt";
-    std::string cmd = "timeout -k 5 " + std::to_string(timeoutSeconds) + " " + quote(FLUOROSIM_CLI);
+    std::string cmd = "timeout -k 5 " + std::to_string(timeoutSeconds);
+    for (const auto& l : launcher) cmd += " " + quote(l);
+    cmd += " " + quote(FLUOROSIM_CLI);
     for (const auto& a : args) cmd += " " + quote(a);
     cmd += " </dev/null >" + quote(outFile.string()) + " 2>" + quote(errFile.string());
     const auto start = std::chrono::steady_clock::now();
@@ -62,6 +66,10 @@ inline RunResult runCli(const TempDir& dir, const std::vector<std::string>& args
     rusage usage{};
     if (::getrusage(RUSAGE_CHILDREN, &usage) == 0) r.maxRssKb = usage.ru_maxrss;
     return r;
+}
+
+inline RunResult runCli(const TempDir& dir, const std::vector<std::string>& args, int timeoutSeconds = 120) {
+    return runCliUnder(dir, {}, args, timeoutSeconds);
 }
 
 // stderr is exactly one line, starting with "fluorosim: ", containing every part.

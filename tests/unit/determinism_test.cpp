@@ -1,6 +1,7 @@
 // The image must not depend on the number of threads (random streams are keyed per pixel and sample).
 #include <gtest/gtest.h>
 
+#include "core/errors.h"
 #include "render/renderer.h"
 #include "support/test_scenes.h"
 
@@ -34,6 +35,42 @@ TEST(Determinism, SameImageForAnyThreadCountAndPassSize) {
     double sum = 0;
     for (float v : a.rgb) sum += v;
     EXPECT_GT(sum, 0.0);
+}
+
+// A distributed render: bands of rows rendered into their own films, sent as bytes and placed into the
+// whole film give the whole render's image exactly, layers included.
+TEST(Determinism, BandsRenderedApartGiveTheSameImage) {
+    const Scene scene = smallScene();
+    const int w = scene.camera.width, h = scene.camera.height;
+    RenderOptions opt;
+    opt.spp = 6;
+    opt.seed = 42;
+    Film whole(w, h, 400, 700, 20, flatCmf(), true);
+    render(scene, whole, opt);
+    Film gathered(w, h, 400, 700, 20, flatCmf(), true);
+    for (const auto& [first, rows] : {std::pair{0, 4}, std::pair{4, 1}, std::pair{5, 4}}) {
+        Film band = gathered.band(rows);
+        RenderOptions o = opt;
+        o.firstRow = first;
+        o.threads = 1;
+        render(scene, band, o);
+        Film received(w, rows, 400, 700, 20, flatCmf(), true);
+        received.setSums(band.sums());
+        gathered.placeRows(first, received);
+    }
+    const ExrImage a = whole.image(opt.spp), b = gathered.image(opt.spp);
+    EXPECT_EQ(a.rgb, b.rgb);
+    ASSERT_EQ(a.rgbLayers.size(), b.rgbLayers.size());
+    ASSERT_FALSE(a.rgbLayers.empty());
+    for (size_t l = 0; l < a.rgbLayers.size(); ++l) EXPECT_EQ(a.rgbLayers[l].rgb, b.rgbLayers[l].rgb);
+    for (size_t i = 0; i < a.spectral.size(); ++i) EXPECT_EQ(a.spectral[i].values, b.spectral[i].values);
+
+    Film band(w, 4, 400, 700, 20, flatCmf(), true);
+    EXPECT_THROW(gathered.placeRows(6, band), Error);  // rows 6..9 of a 9-row film
+    EXPECT_THROW(band.setSums(whole.sums()), Error);
+    RenderOptions beyond = opt;
+    beyond.firstRow = 6;
+    EXPECT_THROW(render(scene, band, beyond), Error);
 }
 
 TEST(Determinism, DifferentSeedsDiffer) {

@@ -1,0 +1,168 @@
+// `import fluorosim`: scenes (a file or a dict), render and acquire, returning NumPy arrays. The only
+// file that includes pybind11. Library errors become Python exceptions carrying the messages the CLI
+// prints: ConfigError -> ValueError, IoError -> OSError, other errors -> RuntimeError. The GIL is
+// released while rendering.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/errors.h"
+#include "core/units.h"
+#include "database.h"
+#include "optics/acquisition.h"
+#include "render/fluorescence.h"
+#include "render/renderer.h"
+#include "scene_files.h"
+
+namespace py = pybind11;
+namespace fs = std::filesystem;
+using namespace fluorosim;
+
+namespace {
+
+const spectra::Database& database() {
+    static const spectra::Database db;
+    return db;
+}
+
+// A scene from a path, or from a dict in the scene format (relative file names then resolve against
+// `base`, the current folder by default).
+Scene loadAnyScene(const py::object& scene, const std::optional<std::string>& base) {
+    const spectra::Database& db = database();
+    if (py::isinstance<py::dict>(scene)) {
+        const std::string text = py::module_::import("json").attr("dumps")(scene).cast<std::string>();
+        const fs::path where = fs::path(base.value_or(fs::current_path().string())) / "<dict>";
+        return loadSceneFromString(
+            text, where, [&db](const std::string& ref, const fs::path& b) { return db.resolve(ref, b); },
+            [&db](const std::string& name, std::optional<double> ec, std::optional<double> qy) { return db.fluorophore(name, ec, qy); },
+            [](const LightSheetSpec& spec) { return optics::makeLightSheet(spec); });
+    }
+    return app::loadSceneFile(py::str(scene).cast<std::string>(), db);
+}
+
+template <typename T>
+py::array_t<T> toArray(const std::vector<T>& values, std::vector<py::ssize_t> shape) {
+    py::array_t<T> a(shape);
+    std::copy(values.begin(), values.end(), a.mutable_data());
+    return a;
+}
+
+py::dict renderScene(const py::object& sceneArg, std::optional<int> spp, std::optional<uint64_t> seed, int threads,
+                const std::optional<std::string>& base) {
+    const Scene scene = [&] {
+        Scene s = loadAnyScene(sceneArg, base);
+        if (seed) s.render.seed = *seed;
+        return s;
+    }();
+    RenderOptions opt;
+    opt.spp = spp.value_or(scene.render.spp);
+    opt.threads = threads;
+    opt.seed = scene.render.seed;
+    opt.sppPerPass = opt.spp;
+    opt.validate();
+    Film film(scene.camera.width, scene.camera.height, scene.spectral.lambdaMin, scene.spectral.lambdaMax, scene.spectral.binWidth,
+              database().cie1931(), FluorescencePlan(scene).active());
+    RenderSummary summary;
+    {
+        py::gil_scoped_release release;
+        summary = fluorosim::render(scene, film, opt);
+    }
+    const ExrImage img = film.image(summary.sppCompleted);
+    const auto h = static_cast<py::ssize_t>(img.height), w = static_cast<py::ssize_t>(img.width);
+    py::dict out, layers, spectral;
+    out["rgb"] = toArray(img.rgb, {h, w, 3});
+    for (const RgbLayer& l : img.rgbLayers) layers[py::str(l.prefix)] = toArray(l.rgb, {h, w, 3});
+    for (const SpectralLayer& l : img.spectral) {
+        const auto bins = static_cast<py::ssize_t>(l.wavelengthsNm.size());
+        spectral[py::str(l.prefix.empty() ? "total" : l.prefix)] = toArray(l.values, {bins, h, w});
+    }
+    out["rgb_layers"] = layers;
+    out["spectral"] = spectral;  // per layer: (bins, height, width), spectral radiance per nm
+    out["wavelengths_nm"] = toArray(img.spectral.at(0).wavelengthsNm, {static_cast<py::ssize_t>(img.spectral.at(0).wavelengthsNm.size())});
+    out["spp"] = summary.sppCompleted;
+    out["seed"] = opt.seed;
+    out["seconds"] = summary.seconds;
+    out["paths"] = summary.stats.paths;
+    out["non_finite_samples"] = summary.nonFiniteSamples;
+    return out;
+}
+
+py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, const std::optional<std::string>& step, std::optional<int> spp,
+                 std::optional<int64_t> seed, const std::vector<std::string>& channels, int threads, const std::optional<std::string>& base) {
+    const Scene scene = loadAnyScene(sceneArg, base);
+    optics::Microscope m = optics::Microscope::fromScene(scene, database());
+    if (planes) {
+        if (*planes < 1 || *planes > 4096) throw ConfigError("--planes: must lie in [1, 4096], got " + std::to_string(*planes));
+        m.stack.planes = *planes;
+    }
+    if (step) m.stack.stepMm = parseQuantity(*step, Dimension::Length, "--step");
+    if (!(m.stack.stepMm > 0)) throw ConfigError("--step: must be positive, got " + step.value_or(""));
+    m.validate(scene);
+    if (seed && *seed < 0) throw ConfigError("--seed: must be >= 0, got " + std::to_string(*seed));
+    optics::AcquireOptions o;
+    o.spp = spp.value_or(scene.render.spp);
+    if (o.spp < 1 || o.spp > (1 << 24)) throw ConfigError("--spp: must lie in [1, 16777216], got " + std::to_string(o.spp));
+    o.seed = seed ? static_cast<uint64_t>(*seed) : scene.render.seed;
+    o.threads = threads;
+    std::vector<size_t> selected;
+    for (const std::string& name : channels) {
+        try {
+            selected.push_back(m.channelIndex(name));
+        } catch (const ConfigError& e) {
+            throw ConfigError("--channels: " + std::string(e.what()));
+        }
+    }
+    if (selected.empty())
+        for (size_t c = 0; c < m.channels.size(); ++c) selected.push_back(c);
+    optics::Stack stack = optics::emptyStack(m, selected);
+    {
+        py::gil_scoped_release release;
+        optics::acquireStack(scene, m, stack, o);
+    }
+    const std::vector<py::ssize_t> shape{static_cast<py::ssize_t>(stack.channels.size()), stack.planes, stack.height, stack.width};
+    py::dict out;
+    out["counts"] = toArray(stack.counts, shape);  // (channel, z, y, x), ADU, one noisy read-out
+    out["expected"] = toArray(stack.expected, shape);
+    out["stderr"] = toArray(stack.stderrElectrons, shape);
+    py::list names;
+    for (size_t c : stack.channels) names.append(m.channels[c].name);
+    out["channels"] = names;
+    out["pixel_size_um"] = m.pixelSizeMm() * 1e3;
+    out["z_step_um"] = m.stack.stepMm * 1e3;
+    out["spp"] = o.spp;
+    out["seed"] = o.seed;
+    return out;
+}
+
+}  // namespace
+
+PYBIND11_MODULE(fluorosim, mod) {
+    mod.doc() = "Fluorosim: spectral Monte Carlo simulation of fluorescence microscopy (docs/python.md)";
+    // Registered most derived first, so that each error reaches its own Python type.
+    py::register_exception_translator([](std::exception_ptr p) {
+        try {
+            if (p) std::rethrow_exception(p);
+        } catch (const ConfigError& e) {
+            PyErr_SetString(PyExc_ValueError, e.what());
+        } catch (const IoError& e) {
+            PyErr_SetString(PyExc_OSError, e.what());
+        } catch (const Error& e) {
+            PyErr_SetString(PyExc_RuntimeError, e.what());
+        }
+    });
+    mod.def("render", &renderScene, py::arg("scene"), py::kw_only(), py::arg("spp") = py::none(), py::arg("seed") = py::none(),
+            py::arg("threads") = 0, py::arg("base") = py::none(),
+            "Render a scene (a path or a dict). Returns a dict: rgb (H, W, 3), rgb_layers, spectral {layer: (bins, H, W)}, "
+            "wavelengths_nm, spp, seed, seconds, paths, non_finite_samples.");
+    mod.def("acquire", &acquireScene, py::arg("scene"), py::kw_only(), py::arg("planes") = py::none(), py::arg("step") = py::none(),
+            py::arg("spp") = py::none(), py::arg("seed") = py::none(), py::arg("channels") = std::vector<std::string>{},
+            py::arg("threads") = 0, py::arg("base") = py::none(),
+            "Acquire a light-sheet z-stack of a scene with a microscope block. Returns a dict: counts (uint16), expected and "
+            "stderr (float32), each (channel, z, y, x); channels, pixel_size_um, z_step_um, spp, seed. Same numbers as "
+            "`fluorosim acquire` with the same options.");
+}

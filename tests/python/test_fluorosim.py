@@ -1,0 +1,152 @@
+"""`import fluorosim` (python/fluorosim_module.cpp) against the CLI: the same numbers for the same
+options, the same error messages, a stack round trip through tifffile with its metadata, and the GIL
+released while rendering. Run by ctest (tests/CMakeLists.txt) with PYTHONPATH at build/python."""
+import copy
+import json
+import os
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import tifffile
+
+import fluorosim
+
+CLI = os.environ["FLUOROSIM_CLI"]
+SOURCE = Path(os.environ["FLUOROSIM_SOURCE_DIR"])
+BEADS = SOURCE / "samples" / "lightsheet" / "beads.json"
+
+# A small render scene (the CLI tests' floor, ball and light).
+SMALL = {
+    "fluorosim_scene": 1,
+    "spectral": {"range": ["400 nm", "700 nm"], "bin_width": "50 nm"},
+    "render": {"seed": 1, "spp": 4},
+    "camera": {"position": ["0 mm", "50 mm", "-200 mm"], "look_at": ["0 mm", "50 mm", "0 mm"], "fov_y_deg": 40,
+               "resolution": [24, 16]},
+    "materials": {"white": {"type": "diffuse", "reflectance": 0.7}},
+    "shapes": [
+        {"type": "quad", "name": "floor", "origin": ["-100 mm", "0 mm", "-100 mm"], "edge1": ["200 mm", "0 mm", "0 mm"],
+         "edge2": ["0 mm", "0 mm", "200 mm"], "material": "white"},
+        {"type": "sphere", "name": "ball", "center": ["0 mm", "30 mm", "0 mm"], "radius": "30 mm", "material": "white"},
+        {"type": "quad", "name": "light", "origin": ["-20 mm", "120 mm", "-20 mm"], "edge1": ["40 mm", "0 mm", "0 mm"],
+         "edge2": ["0 mm", "0 mm", "40 mm"], "emission": {"radiance": {"reference": "illuminant:D65", "scale": 0.1}, "two_sided": True}},
+    ],
+}
+
+
+def beads(width=16):
+    scene = json.loads(BEADS.read_text())
+    scene["shapes"][0]["file"] = str(BEADS.parent / "bath.obj")
+    scene["microscope"]["detector"]["width"] = width
+    scene["microscope"]["detector"]["height"] = width
+    return scene
+
+
+def cli(*args):
+    return subprocess.run([CLI, *map(str, args)], capture_output=True, text=True, timeout=300)
+
+
+def test_acquire_gives_the_cli_stack(tmp_path):
+    scene = tmp_path / "beads.json"
+    scene.write_text(json.dumps(beads()))
+    options = ["--planes", "4", "--spp", "4", "--seed", "3", "--step", "1um"]
+    run = cli("acquire", scene, "-o", tmp_path / "s.ome.tif", *options)
+    assert run.returncode == 0, run.stderr
+    stack = fluorosim.acquire(str(scene), planes=4, spp=4, seed=3, step="1um")
+    assert stack["counts"].shape == (1, 4, 16, 16) and stack["counts"].dtype == np.uint16
+    assert stack["channels"] == ["AF488"]
+    assert stack["pixel_size_um"] == pytest.approx(6.5 / 16, rel=1e-12)
+    assert stack["z_step_um"] == pytest.approx(1.0, rel=1e-12)
+    counts = tifffile.imread(tmp_path / "s.ome.tif")
+    expected = tifffile.imread(tmp_path / "s.expected.ome.tif")
+    np.testing.assert_array_equal(stack["counts"].ravel(), counts.ravel())
+    np.testing.assert_array_equal(stack["expected"].ravel(), expected.ravel())
+    assert stack["expected"].max() > stack["expected"].min()
+    # The same scene as a dict (relative mesh path resolved against `base`).
+    scene_dict = beads()
+    scene_dict["shapes"][0]["file"] = "bath.obj"
+    from_dict = fluorosim.acquire(scene_dict, planes=4, spp=4, seed=3, step="1um", base=str(BEADS.parent))
+    np.testing.assert_array_equal(from_dict["counts"], stack["counts"])
+
+
+def test_render_from_a_dict_matches_the_file_and_has_its_wavelengths(tmp_path):
+    path = tmp_path / "small.json"
+    path.write_text(json.dumps(SMALL))
+    a = fluorosim.render(SMALL, seed=5)
+    b = fluorosim.render(str(path), seed=5, threads=1)
+    assert a["rgb"].shape == (16, 24, 3)
+    np.testing.assert_array_equal(a["rgb"], b["rgb"])
+    np.testing.assert_array_equal(a["wavelengths_nm"], [425, 475, 525, 575, 625, 675])
+    assert a["spectral"]["total"].shape == (6, 16, 24)
+    assert a["spp"] == 4 and a["paths"] == 4 * 16 * 24
+    assert a["rgb"].mean() > 0
+    other = fluorosim.render(SMALL, seed=6)
+    assert not np.array_equal(a["rgb"], other["rgb"])
+
+
+def test_errors_carry_the_cli_messages(tmp_path):
+    path = tmp_path / "small.json"
+    path.write_text(json.dumps(SMALL))
+    run = cli("render", path, "-o", tmp_path / "x.exr", "--spp", "0")
+    assert run.returncode == 2
+    with pytest.raises(ValueError) as e:
+        fluorosim.render(str(path), spp=0)
+    assert run.stderr == f"fluorosim: error: {e.value}\n"
+    missing = tmp_path / "missing.json"
+    run = cli("render", missing, "-o", tmp_path / "x.exr")
+    assert run.returncode == 3
+    with pytest.raises(OSError) as e:
+        fluorosim.render(str(missing))
+    assert run.stderr == f"fluorosim: I/O error: {e.value}\n"
+    bad = copy.deepcopy(SMALL)
+    bad["camera"]["fov_y_deg"] = "wide"
+    with pytest.raises(ValueError, match="fov_y_deg"):
+        fluorosim.render(bad)
+    with pytest.raises(ValueError, match='--channels: .*"mCherry"'):
+        fluorosim.acquire(beads(), channels=["mCherry"], planes=1, spp=1)
+
+
+def test_stack_round_trips_through_tifffile_with_its_metadata(tmp_path):
+    scene = beads()
+    second = copy.deepcopy(scene["microscope"]["channels"][0])
+    second["name"] = "AF488b"
+    scene["microscope"]["channels"].append(second)
+    stack = fluorosim.acquire(scene, planes=2, spp=2, seed=1)
+    assert stack["expected"].shape == (2, 2, 16, 16) and stack["channels"] == ["AF488", "AF488b"]
+    out = tmp_path / "stack.ome.tif"
+    tifffile.imwrite(out, stack["expected"], ome=True,
+                     metadata={"axes": "CZYX", "PhysicalSizeX": stack["pixel_size_um"], "PhysicalSizeY": stack["pixel_size_um"],
+                               "PhysicalSizeZ": stack["z_step_um"], "Channel": {"Name": stack["channels"]}})
+    with tifffile.TiffFile(out) as tif:
+        back = tif.series[0].asarray()
+        assert tif.series[0].axes == "CZYX"
+        pixels = tifffile.xml2dict(tif.ome_metadata)["OME"]["Image"]["Pixels"]
+    np.testing.assert_array_equal(back, stack["expected"])
+    assert pixels["PhysicalSizeX"] == pytest.approx(stack["pixel_size_um"])
+    assert pixels["PhysicalSizeZ"] == pytest.approx(stack["z_step_um"])
+    assert [c["Name"] for c in pixels["Channel"]] == stack["channels"]
+
+
+def test_the_gil_is_released_while_rendering():
+    scene = copy.deepcopy(SMALL)
+    scene["camera"]["resolution"] = [96, 64]
+    done = threading.Event()
+    seconds = []
+
+    def work():
+        seconds.append(fluorosim.render(scene, spp=64, threads=1)["seconds"])
+        done.set()
+
+    thread = threading.Thread(target=work)
+    thread.start()
+    ticks = 0
+    while not done.is_set():  # runs only while the render thread does not hold the GIL
+        ticks += 1
+        time.sleep(0.001)
+    thread.join()
+    # With the GIL held for the whole render this loop would run once or twice.
+    assert seconds[0] > 0.05, "the render was too short to tell"
+    assert ticks > 10, f"{ticks} ticks during a {seconds[0]:.2f} s render"
