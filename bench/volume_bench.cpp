@@ -5,7 +5,7 @@
 //   RMSE of the fluorescent layer against a 1024-spp reference (grid majorant, independent seed),
 //   with the work-normalized error relMSE x seconds.
 // - BM_NeuronResolution: the same crop from volumes voxelized at 1, 0.5 and 0.25 um: cost per path
-//   against the grid's size, and the volume's memory (NanoVDB grids plus majorant cells) against the
+//   against the grid's size, and the volume's memory (sparse voxel blocks plus majorant cells) against the
 //   size of the .vdb file.
 #include <benchmark/benchmark.h>
 

@@ -7,9 +7,6 @@ find_package(OpenEXR 3 CONFIG REQUIRED)
 
 list(APPEND CMAKE_MODULE_PATH /usr/lib/x86_64-linux-gnu/cmake/OpenVDB /usr/lib/cmake/OpenVDB)
 find_package(OpenVDB REQUIRED)
-if(NOT EXISTS /usr/include/nanovdb/NanoVDB.h)
-  message(FATAL_ERROR "NanoVDB headers not found: install libnanovdb-dev")
-endif()
 
 find_package(embree 3 REQUIRED)
 find_package(PNG REQUIRED)

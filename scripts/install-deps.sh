@@ -3,7 +3,7 @@
 set -euo pipefail
 packages=(
   g++ cmake ninja-build ccache pkg-config
-  libtbb-dev libopenvdb-dev libnanovdb-dev libboost-iostreams-dev libboost-dev
+  libtbb-dev libopenvdb-dev libboost-iostreams-dev libboost-dev
   libembree-dev libopenexr-dev libimath-dev libpng-dev libtiff-dev libassimp-dev
   libcli11-dev nlohmann-json3-dev libgtest-dev libbenchmark-dev
   # The viewer (FLUOROSIM_WITH_VIEWER, docs/viewer.md): VTK 9.1 and X11 headers; its tests render

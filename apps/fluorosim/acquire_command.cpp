@@ -149,7 +149,8 @@ void runAcquire(const AcquireArgs& a) {
         std::vector<double> sorted = image.electrons;
         std::sort(sorted.begin(), sorted.end());
         const double cut = sorted[static_cast<size_t>(0.9 * (sorted.size() - 1))];
-        for (size_t i = 0; i < image.electrons.size(); ++i)
+        const bool parts = image.directStderr.size() == image.electrons.size() && image.pathStderr.size() == image.electrons.size();
+        for (size_t i = 0; parts && i < image.electrons.size(); ++i)
             if (image.electrons[i] >= cut && image.electrons[i] > 0) {
                 directRel.push_back(image.directStderr[i] / image.electrons[i]);
                 pathRel.push_back(image.pathStderr[i] / image.electrons[i]);

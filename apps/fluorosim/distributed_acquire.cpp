@@ -15,23 +15,32 @@ uint64_t planeTask(size_t channel, int plane) { return (uint64_t(channel) << 32)
 size_t taskChannel(uint64_t task) { return static_cast<size_t>(task >> 32); }
 int taskPlane(uint64_t task) { return static_cast<int>(task & 0xffffffffu); }
 
-// A plane image as bytes between ranks of the same binary: a fixed header, then electrons and their
-// standard errors as doubles, so the root stores exactly what a single process would.
+// A plane image as bytes between ranks of the same binary: a fixed header, then the per-pixel arrays
+// (electrons, their standard errors, and the split estimator's per-part standard errors) as doubles,
+// so the root stores and summarises exactly what a single process would.
 struct PlaneHeader {
     int32_t width, height;
     uint8_t complete;
     double seconds, largestSample;
+    double directElectrons, pathElectrons, directSeconds, pathSeconds;
     PathStats stats;
 };
 static_assert(std::is_trivially_copyable_v<PlaneHeader>);
 
+constexpr size_t kPlaneArrays = 4;
+std::vector<double> optics::PlaneImage::*const kArrays[kPlaneArrays] = {&optics::PlaneImage::electrons, &optics::PlaneImage::stderrElectrons,
+                                                                        &optics::PlaneImage::directStderr, &optics::PlaneImage::pathStderr};
+
 std::string encodePlane(const optics::PlaneImage& image) {
-    const PlaneHeader h{image.width, image.height, image.complete, image.seconds, image.largestSample, image.stats};
-    const size_t n = image.electrons.size() * sizeof(double);
-    std::string bytes(sizeof h + 2 * n, '\0');
+    const PlaneHeader h{image.width,           image.height,         image.complete,      image.seconds, image.largestSample,
+                        image.directElectrons, image.pathElectrons, image.directSeconds, image.pathSeconds, image.stats};
+    const size_t pixels = image.electrons.size();
+    std::string bytes(sizeof h + kPlaneArrays * pixels * sizeof(double), '\0');
     std::memcpy(bytes.data(), &h, sizeof h);
-    std::memcpy(bytes.data() + sizeof h, image.electrons.data(), n);
-    std::memcpy(bytes.data() + sizeof h + n, image.stderrElectrons.data(), n);
+    for (size_t k = 0; k < kPlaneArrays; ++k) {
+        const std::vector<double>& v = image.*kArrays[k];
+        if (v.size() == pixels) std::memcpy(bytes.data() + sizeof h + k * pixels * sizeof(double), v.data(), pixels * sizeof(double));
+    }
     return bytes;
 }
 
@@ -40,18 +49,23 @@ optics::PlaneImage decodePlane(std::string_view bytes) {
     if (bytes.size() < sizeof h) throw Error("a plane from another rank is truncated");
     std::memcpy(&h, bytes.data(), sizeof h);
     const size_t pixels = static_cast<size_t>(h.width) * static_cast<size_t>(h.height);
-    if (bytes.size() != sizeof h + 2 * pixels * sizeof(double)) throw Error("a plane from another rank has the wrong size");
+    if (bytes.size() != sizeof h + kPlaneArrays * pixels * sizeof(double)) throw Error("a plane from another rank has the wrong size");
     optics::PlaneImage image;
     image.width = h.width;
     image.height = h.height;
     image.complete = h.complete != 0;
     image.seconds = h.seconds;
     image.largestSample = h.largestSample;
+    image.directElectrons = h.directElectrons;
+    image.pathElectrons = h.pathElectrons;
+    image.directSeconds = h.directSeconds;
+    image.pathSeconds = h.pathSeconds;
     image.stats = h.stats;
-    image.electrons.resize(pixels);
-    image.stderrElectrons.resize(pixels);
-    std::memcpy(image.electrons.data(), bytes.data() + sizeof h, pixels * sizeof(double));
-    std::memcpy(image.stderrElectrons.data(), bytes.data() + sizeof h + pixels * sizeof(double), pixels * sizeof(double));
+    for (size_t k = 0; k < kPlaneArrays; ++k) {
+        std::vector<double>& v = image.*kArrays[k];
+        v.resize(pixels);
+        std::memcpy(v.data(), bytes.data() + sizeof h + k * pixels * sizeof(double), pixels * sizeof(double));
+    }
     return image;
 }
 
