@@ -37,6 +37,11 @@ void AcquireOptions::validate() const {
     if (spp < 1) throw ConfigError("spp must be at least 1, got " + std::to_string(spp));
     if (directSpp < 1) throw ConfigError("direct samples per pixel must be at least 1, got " + std::to_string(directSpp));
     if (threads < 0) throw ConfigError("threads must be >= 0, got " + std::to_string(threads));
+    if (noiseRatio && !(*noiseRatio > 0 && std::isfinite(*noiseRatio)))
+        throw ConfigError("noise ratio must be positive and finite, got " + std::to_string(*noiseRatio));
+    if (noiseRatio && (maxSpp < spp || pilotSpp < 2))
+        throw ConfigError("adaptive sampling needs max spp >= spp and at least 2 pilot samples, got max " + std::to_string(maxSpp) + ", spp " +
+                          std::to_string(spp) + ", pilot " + std::to_string(pilotSpp));
 }
 
 uint64_t planeStreamKey(const std::string& channelName, int plane) { return mixBits(hashName(channelName) + mixBits(static_cast<uint64_t>(plane) + 1)); }
@@ -82,6 +87,9 @@ struct PlaneCamera {
     }
 };
 
+// Pilot paths of adaptive sampling draw from sample indices the estimate never reaches.
+constexpr uint64_t kPilotSample = uint64_t(1) << 40;
+
 struct PixelTally {
     double sum = 0, sum2 = 0;
     int n = 0;
@@ -124,6 +132,9 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
     std::vector<double> rowLargest(static_cast<size_t>(height), 0.0), rowDirect(static_cast<size_t>(height), 0.0),
         rowPath(static_cast<size_t>(height), 0.0), rowDirectSeconds(static_cast<size_t>(height), 0.0),
         rowPathSeconds(static_cast<size_t>(height), 0.0);
+    std::vector<uint64_t> rowSamples(static_cast<size_t>(height), 0), rowPilots(static_cast<size_t>(height), 0);
+    // Dark electrons of the exposure: part of the camera noise an adaptive target is relative to.
+    const double darkElectrons = detector.darkCurrentElectronsPerS * detector.exposureS;
     std::vector<char> rowDone(static_cast<size_t>(height), 0);
     int rowsDone = 0;
     std::mutex progressMutex;  // the callback is called from one thread at a time
@@ -136,8 +147,30 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
             PixelTally paths, directTally;
             double directVariance = 0;
             const auto t0 = std::chrono::steady_clock::now();
-            for (int s = 0; s < o.spp; ++s) {
-                Rng rng = Rng::forKey(o.seed, streamKey + pixel, static_cast<uint64_t>(s));
+            // The direct part: Owen-scrambled Sobol' points over the component, the pixel area, the PSF,
+            // the cone and the points along the core, scrambled per pixel; transmittances from a stream
+            // keyed apart from the paths'.
+            if (useDirect) {
+                const uint64_t scramble = mixBits(o.seed ^ mixBits(streamKey + pixel));
+                DirectBeamEstimator::Pixel points;
+                for (int s = 0; s < o.directSpp; ++s) {
+                    auto u = [&](int dim) { return sobol->sample(s, dim, scramble); };
+                    const DirectBeamEstimator::Component c = direct.sampleComponent(u(0));
+                    Vec3 focal = camera.focalPoint(x, y, u(1), u(2));
+                    if (o.diffraction) focal += camera.psfOffset(airy.sampleRadiusMm(u(3), c.lambdaNm, objective.na), u(4));
+                    double cosT = 0;
+                    const Ray ray = camera.ray(focal, u(5), u(6), &cosT);
+                    direct.addSample(points, ray, scene.camera.medium, c, u(7), cosT * camera.perSample);
+                }
+                Rng rng = Rng::forKey(o.seed, mixBits(streamKey + pixel) ^ 0x5DEECE66DULL, 0);
+                const DirectBeamEstimator::Estimate d = direct.finish(points, o.directPicks, rng.uniform(), rng);
+                directTally.sum = d.mean;
+                directTally.n = 1;
+                directVariance = d.variance;
+            }
+            const auto t1 = std::chrono::steady_clock::now();
+            auto pathSample = [&](uint64_t s) {
+                Rng rng = Rng::forKey(o.seed, streamKey + pixel, s);
                 const SampledWavelengths wl = wavelengths.sample(rng.uniform(), rng.uniform());
                 Vec3 focal = camera.focalPoint(x, y, rng.uniform(), rng.uniform());
                 // Diffraction: the focal point moves by a sample of the hero wavelength's Airy pattern. Its
@@ -162,34 +195,30 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                 for (int j = 0; j < kNumWavelengths; ++j)
                     if (L[j] != 0 && wl.pdf[j] != 0) e += L[j] / wl.pdf[j] * detection(wl.lambda[j]);
                 e *= cosT * camera.perSample / kNumWavelengths;
+                return e;
+            };
+            int n = o.spp;
+            if (o.noiseRatio) {
+                // Pilot paths from streams the estimate never uses decide how many to trace.
+                PixelTally pilot;
+                for (int s = 0; s < o.pilotSpp; ++s) pilot.add(pathSample(kPilotSample + static_cast<uint64_t>(s)));
+                const double signal = std::max(0.0, pilot.mean() + directTally.mean());
+                const double target = sqr(*o.noiseRatio) * (signal + darkElectrons + sqr(detector.readNoiseElectrons));
+                const double perPath = pilot.varianceOfMean() * pilot.n;
+                const double room = target - directVariance;
+                const double wanted = room > 0 ? std::ceil(perPath / room) : double(o.maxSpp);
+                n = static_cast<int>(std::clamp(wanted, double(o.spp), double(o.maxSpp)));
+                rowPilots[yRow] += static_cast<uint64_t>(o.pilotSpp);
+            }
+            for (int s = 0; s < n; ++s) {
+                const double e = pathSample(static_cast<uint64_t>(s));
                 paths.add(e);
                 rowLargest[yRow] = std::max(rowLargest[yRow], e);
             }
-            const auto t1 = std::chrono::steady_clock::now();
-            // The direct part: Owen-scrambled Sobol' points over the component, the pixel area, the PSF,
-            // the cone and the points along the core, scrambled per pixel; transmittances from a stream
-            // keyed apart from the paths'.
-            if (useDirect) {
-                const uint64_t scramble = mixBits(o.seed ^ mixBits(streamKey + pixel));
-                DirectBeamEstimator::Pixel points;
-                for (int s = 0; s < o.directSpp; ++s) {
-                    auto u = [&](int dim) { return sobol->sample(s, dim, scramble); };
-                    const DirectBeamEstimator::Component c = direct.sampleComponent(u(0));
-                    Vec3 focal = camera.focalPoint(x, y, u(1), u(2));
-                    if (o.diffraction) focal += camera.psfOffset(airy.sampleRadiusMm(u(3), c.lambdaNm, objective.na), u(4));
-                    double cosT = 0;
-                    const Ray ray = camera.ray(focal, u(5), u(6), &cosT);
-                    direct.addSample(points, ray, scene.camera.medium, c, u(7), cosT * camera.perSample);
-                }
-                Rng rng = Rng::forKey(o.seed, mixBits(streamKey + pixel) ^ 0x5DEECE66DULL, 0);
-                const DirectBeamEstimator::Estimate d = direct.finish(points, o.directPicks, rng.uniform(), rng);
-                directTally.sum = d.mean;
-                directTally.n = 1;
-                directVariance = d.variance;
-            }
+            rowSamples[yRow] += static_cast<uint64_t>(n);
             const auto t2 = std::chrono::steady_clock::now();
-            rowPathSeconds[yRow] += std::chrono::duration<double>(t1 - t0).count();
-            rowDirectSeconds[yRow] += std::chrono::duration<double>(t2 - t1).count();
+            rowDirectSeconds[yRow] += std::chrono::duration<double>(t1 - t0).count();
+            rowPathSeconds[yRow] += std::chrono::duration<double>(t2 - t1).count();
             r.directStderr[pixel] = std::sqrt(directVariance);
             r.pathStderr[pixel] = std::sqrt(paths.varianceOfMean());
             r.electrons[pixel] = paths.mean() + directTally.mean();
@@ -210,6 +239,8 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         r.pathElectrons += rowPath[y];
         r.directSeconds += rowDirectSeconds[y];
         r.pathSeconds += rowPathSeconds[y];
+        r.pathSamples += rowSamples[y];
+        r.pilotSamples += rowPilots[y];
     }
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return r;

@@ -35,6 +35,13 @@ struct AcquireOptions {
     int spp = 16;          // path samples per pixel
     int directSpp = 64;    // samples of the direct part per pixel (split estimator)
     int directPicks = 16;  // transmittance estimates per pixel for the direct part
+    // Adaptive sampling to a noise target: each pixel traces as many paths (spp at least, maxSpp at
+    // most) as bring its Monte Carlo standard error to `noiseRatio` times the camera's noise of its
+    // expected signal, √(signal + dark + read²). The number is decided from `pilotSpp` separate pilot
+    // paths that the estimate does not use, so the stopping rule does not bias the mean.
+    std::optional<double> noiseRatio;
+    int maxSpp = 4096;
+    int pilotSpp = 16;
     uint64_t seed = 1;
     int threads = 0;          // 0: all cores
     bool diffraction = true;  // the Airy PSF; off gives the geometric image
@@ -56,6 +63,8 @@ struct PlaneImage {
     double directElectrons = 0, pathElectrons = 0;
     std::vector<double> directStderr, pathStderr;
     double directSeconds = 0, pathSeconds = 0;  // thread time spent on each part
+    // Paths traced for the estimate and for adaptive sampling's pilots (0 without a noise target).
+    uint64_t pathSamples = 0, pilotSamples = 0;
 };
 
 // Random streams of a plane, keyed by the channel's name (not its position in a filtered list) and

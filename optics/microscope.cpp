@@ -281,4 +281,18 @@ size_t Microscope::channelIndex(const std::string& name) const {
     throw ConfigError("no channel named \"" + name + "\" in the microscope (channels: " + names + ")");
 }
 
+std::vector<size_t> Microscope::selectChannels(const std::vector<std::string>& names, const std::string& what) const {
+    std::vector<size_t> selected;
+    for (const std::string& name : names) {
+        try {
+            selected.push_back(channelIndex(name));
+        } catch (const ConfigError& e) {
+            throw ConfigError(what + ": " + e.what());
+        }
+    }
+    if (selected.empty())
+        for (size_t c = 0; c < channels.size(); ++c) selected.push_back(c);
+    return selected;
+}
+
 }  // namespace fluorosim::optics

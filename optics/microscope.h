@@ -73,6 +73,9 @@ struct Microscope {
     std::vector<Light> lightsAt(const Scene& scene, const MicroscopeChannel& channel, double offsetMm) const;
     // The channel named `name`; ConfigError listing the channels otherwise.
     size_t channelIndex(const std::string& name) const;
+    // The channels named, in that order, or every channel when `names` is empty; ConfigError prefixed
+    // with `what` (the option that named them) for a name that is not a channel.
+    std::vector<size_t> selectChannels(const std::vector<std::string>& names, const std::string& what) const;
 };
 
 // Bytes a stack of this size holds in memory (float expected electrons and standard errors, 16-bit

@@ -109,16 +109,7 @@ py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, con
     if (o.spp < 1 || o.spp > (1 << 24)) throw ConfigError("--spp: must lie in [1, 16777216], got " + std::to_string(o.spp));
     o.seed = seed ? static_cast<uint64_t>(*seed) : scene.render.seed;
     o.threads = threads;
-    std::vector<size_t> selected;
-    for (const std::string& name : channels) {
-        try {
-            selected.push_back(m.channelIndex(name));
-        } catch (const ConfigError& e) {
-            throw ConfigError("--channels: " + std::string(e.what()));
-        }
-    }
-    if (selected.empty())
-        for (size_t c = 0; c < m.channels.size(); ++c) selected.push_back(c);
+    const std::vector<size_t> selected = m.selectChannels(channels, "--channels");
     optics::Stack stack = optics::emptyStack(m, selected);
     {
         py::gil_scoped_release release;

@@ -4,6 +4,7 @@
 // writes the complete planes, and `--resume` continues to the same result as an uninterrupted run.
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
@@ -15,6 +16,7 @@
 #include "cluster.h"
 #include "commands.h"
 #include "core/errors.h"
+#include "core/math.h"
 #include "core/units.h"
 #include "distributed_acquire.h"
 #include "optics/acquisition.h"
@@ -32,7 +34,8 @@ extern "C" void onAcquireSignal(int) { gCancel.store(true); }
 
 struct AcquireArgs {
     std::string scene, output;
-    std::optional<int> planes, spp, directSpp;
+    std::optional<int> planes, spp, directSpp, maxSpp;
+    std::optional<double> noiseRatio;
     std::string estimator = "split";
     std::optional<std::string> step;
     std::optional<int64_t> seed;
@@ -52,7 +55,8 @@ std::string fingerprint(const AcquireArgs& a, const optics::Microscope& m, const
     for (size_t c : stack.channels) channels.push_back(m.channels[c].name);
     const nlohmann::json j = {{"scene_fnv1a", h}, {"seed", o.seed}, {"spp", o.spp}, {"planes", m.stack.planes}, {"step_mm", m.stack.stepMm},
                               {"channels", channels}, {"diffraction", o.diffraction}, {"estimator", optics::estimatorName(o.estimator)},
-                              {"direct_spp", o.directSpp}};
+                              {"direct_spp", o.directSpp}, {"noise_ratio", o.noiseRatio.value_or(0.0)},
+                              {"max_spp", o.noiseRatio ? o.maxSpp : 0}};
     return j.dump();
 }
 
@@ -92,19 +96,22 @@ void runAcquire(const AcquireArgs& a) {
             throw ConfigError("--direct-spp: must lie in [1, 16777216], got " + std::to_string(*a.directSpp));
         o.directSpp = *a.directSpp;
     }
+    if (a.noiseRatio) {
+        if (!(*a.noiseRatio > 0) || !std::isfinite(*a.noiseRatio))
+            throw ConfigError("--noise-ratio: must be positive and finite, got " + std::to_string(*a.noiseRatio));
+        o.noiseRatio = *a.noiseRatio;
+    }
+    if (a.maxSpp) {
+        if (!a.noiseRatio) throw ConfigError("--max-spp: only with --noise-ratio (adaptive sampling)");
+        if (*a.maxSpp < o.spp || *a.maxSpp > (1 << 24))
+            throw ConfigError("--max-spp: must lie in [spp = " + std::to_string(o.spp) + ", 16777216], got " + std::to_string(*a.maxSpp));
+        o.maxSpp = *a.maxSpp;
+    }
+    if (o.noiseRatio) o.maxSpp = std::max(o.maxSpp, o.spp);
     o.threads = a.threads;
     o.cancel = &gCancel;
 
-    std::vector<size_t> selected;
-    for (const std::string& name : a.channels) {
-        try {
-            selected.push_back(m.channelIndex(name));
-        } catch (const ConfigError& e) {
-            throw ConfigError("--channels: " + std::string(e.what()));
-        }
-    }
-    if (selected.empty())
-        for (size_t c = 0; c < m.channels.size(); ++c) selected.push_back(c);
+    const std::vector<size_t> selected = m.selectChannels(a.channels, "--channels");
     if (!cluster::isRoot()) {  // MPI: the other ranks render the planes that rank 0 hands out
         std::signal(SIGINT, onAcquireSignal);
         std::signal(SIGTERM, onAcquireSignal);
@@ -137,6 +144,9 @@ void runAcquire(const AcquireArgs& a) {
     PathStats stats;
     double seconds = 0, largest = 0, directSum = 0, pathSum = 0, directSeconds = 0, pathSeconds = 0;
     std::vector<double> directRel, pathRel;  // relative standard errors of each part over the brightest pixels
+    std::vector<double> mcOverCamera;         // MC variance over the camera's noise variance, brightest pixels
+    uint64_t pathSamples = 0, pilotSamples = 0, pixels = 0;
+    const double darkElectrons = m.detector.darkCurrentElectronsPerS * m.detector.exposureS;
     cb.planeDone = [&](size_t slot, int plane, const optics::PlaneImage& image) {
         checkpoint->append(slot, plane, image);
         stats.add(image.stats);
@@ -146,10 +156,17 @@ void runAcquire(const AcquireArgs& a) {
         pathSum += image.pathElectrons;
         directSeconds += image.directSeconds;
         pathSeconds += image.pathSeconds;
+        pathSamples += image.pathSamples;
+        pilotSamples += image.pilotSamples;
+        pixels += image.electrons.size();
         std::vector<double> sorted = image.electrons;
         std::sort(sorted.begin(), sorted.end());
         const double cut = sorted[static_cast<size_t>(0.9 * (sorted.size() - 1))];
         const bool parts = image.directStderr.size() == image.electrons.size() && image.pathStderr.size() == image.electrons.size();
+        for (size_t i = 0; i < image.electrons.size(); ++i)
+            if (image.electrons[i] >= cut)
+                mcOverCamera.push_back(sqr(image.stderrElectrons[i]) /
+                                       (std::max(0.0, image.electrons[i]) + darkElectrons + sqr(m.detector.readNoiseElectrons)));
         for (size_t i = 0; parts && i < image.electrons.size(); ++i)
             if (image.electrons[i] >= cut && image.electrons[i] > 0) {
                 directRel.push_back(image.directStderr[i] / image.electrons[i]);
@@ -195,6 +212,12 @@ void runAcquire(const AcquireArgs& a) {
                                     {"path_thread_seconds", pathSeconds},
                                     {"median_direct_relative_stderr_top10", median(directRel)},
                                     {"median_path_relative_stderr_top10", median(pathRel)},
+                                    {"noise_ratio_target", o.noiseRatio ? nlohmann::json(*o.noiseRatio) : nlohmann::json(nullptr)},
+                                    // The standard errors' own estimate (heavy tails make it optimistic;
+                                    // scripts/noise-vs-time.sh measures with two seeds).
+                                    {"median_mc_over_camera_variance_top10", median(mcOverCamera)},
+                                    {"mean_path_spp", double(pathSamples) / std::max<double>(1.0, double(pixels))},
+                                    {"pilot_paths", pilotSamples},
                                     {"seed", o.seed},
                                     {"ranks", cluster::size()},
                                     {"seconds", seconds},
@@ -226,6 +249,10 @@ void addAcquireCommand(CLI::App& app) {
                     "split (default: the unscattered light of the sheets by its own low-variance estimator, paths for the rest) or "
                     "path (every sample a full path: the reference)");
     cmd->add_option("--direct-spp", a->directSpp, "Samples per pixel of the direct part (split estimator; default 64)");
+    cmd->add_option("--noise-ratio", a->noiseRatio,
+                    "Adaptive sampling: paths per pixel (--spp at least) until the Monte Carlo standard error is at most this times the "
+                    "camera's noise of the expected signal, sqrt(signal + dark + read^2), decided from separate pilot paths");
+    cmd->add_option("--max-spp", a->maxSpp, "Adaptive sampling: most paths per pixel (default 4096)");
     cmd->add_option("--seed", a->seed, "Random seed (default: the scene's)");
     cmd->add_option("--threads", a->threads, "Threads (0 = all cores)");
     cmd->add_option("--channels", a->channels, "Channels to acquire, by name (default: all)")->delimiter(',');

@@ -23,6 +23,7 @@ struct PlaneHeader {
     uint8_t complete;
     double seconds, largestSample;
     double directElectrons, pathElectrons, directSeconds, pathSeconds;
+    uint64_t pathSamples, pilotSamples;
     PathStats stats;
 };
 static_assert(std::is_trivially_copyable_v<PlaneHeader>);
@@ -33,7 +34,8 @@ std::vector<double> optics::PlaneImage::*const kArrays[kPlaneArrays] = {&optics:
 
 std::string encodePlane(const optics::PlaneImage& image) {
     const PlaneHeader h{image.width,           image.height,         image.complete,      image.seconds, image.largestSample,
-                        image.directElectrons, image.pathElectrons, image.directSeconds, image.pathSeconds, image.stats};
+                        image.directElectrons, image.pathElectrons, image.directSeconds, image.pathSeconds,
+                        image.pathSamples,     image.pilotSamples,  image.stats};
     const size_t pixels = image.electrons.size();
     std::string bytes(sizeof h + kPlaneArrays * pixels * sizeof(double), '\0');
     std::memcpy(bytes.data(), &h, sizeof h);
@@ -60,6 +62,8 @@ optics::PlaneImage decodePlane(std::string_view bytes) {
     image.pathElectrons = h.pathElectrons;
     image.directSeconds = h.directSeconds;
     image.pathSeconds = h.pathSeconds;
+    image.pathSamples = h.pathSamples;
+    image.pilotSamples = h.pilotSamples;
     image.stats = h.stats;
     for (size_t k = 0; k < kPlaneArrays; ++k) {
         std::vector<double>& v = image.*kArrays[k];

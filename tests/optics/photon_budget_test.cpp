@@ -33,10 +33,7 @@ TEST(PhotonBudget, ThinDyeLayerUnderKnownSheetMatchesTheClosedFormChain) {
     scene.media.emplace_back("layer", Spectrum::constant(0.0), Spectrum::constant(0.0), 0.0, 1.33, std::vector<DyeComponent>{{dye, molar}});
     addMediumBox(scene, Vec3(-half, -half, -d / 2), Vec3(half, half, d / 2), 1);
     scene.shapes.back().outsideMedium = 0;
-    addMediumBox(scene, Vec3(-0.4, -0.4, -0.4), Vec3(0.4, 0.4, 0.4), 0);  // the water bath (vacuum outside)
-    scene.shapes.back().material = static_cast<int>(scene.materials.size());
-    scene.materials.push_back(makeDielectric(0.0));
-    scene.materialNames.push_back("bath surface");
+    addBath(scene, 0.4, 0);
     LightSheetSpec spec;
     spec.wavelengthNm = 488;
     spec.powerMw = 1;

@@ -6,7 +6,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <algorithm>
 #include <cstdio>
+#include <optional>
+#include <vector>
 
 #include "optics/acquisition.h"
 #include "optics/light_sheet.h"
@@ -38,10 +41,7 @@ Scene filamentScene(double sigmaS) {
     auto volume = std::make_shared<const VolumeFields>(std::move(ch), Affine(), Interpolation::Trilinear, MajorantGridOptions{});
     scene.media.emplace_back("tissue", Spectrum::constant(0.0), Spectrum::constant(sigmaS), 0.9, 1.33,
                              std::vector<DyeComponent>{{databaseDye("AF594"), 0.0}}, volume);
-    addMediumBox(scene, Vec3(-0.4, -0.4, -0.4), Vec3(0.4, 0.4, 0.4), 0);
-    scene.shapes.back().material = static_cast<int>(scene.materials.size());
-    scene.materials.push_back(makeDielectric(0.0));
-    scene.materialNames.push_back("bath surface");
+    addBath(scene, 0.4, 0);
     LightSheetSpec spec;
     spec.wavelengthNm = 561;
     spec.powerMw = 1;
@@ -54,7 +54,8 @@ Scene filamentScene(double sigmaS) {
     return scene;
 }
 
-optics::PlaneImage render(const Scene& scene, optics::Estimator estimator, int spp, uint64_t seed) {
+optics::PlaneImage render(const Scene& scene, optics::Estimator estimator, int spp, uint64_t seed,
+                          std::optional<double> noiseRatio = std::nullopt) {
     optics::ObjectiveOptions objective;
     objective.na = 0.5;
     objective.magnification = 6.5 / 1.5;  // 1.5 µm object pixels: the field spans 36 µm
@@ -67,6 +68,8 @@ optics::PlaneImage render(const Scene& scene, optics::Estimator estimator, int s
     o.estimator = estimator;
     o.spp = spp;
     o.seed = seed;
+    o.noiseRatio = noiseRatio;
+    o.maxSpp = 1024;
     return optics::renderPlane(scene, objective, optics::FocalPlane{}, optics::Filter::bandPass(band), detector, kSize, kSize, o);
 }
 
@@ -92,7 +95,9 @@ void expectSameImage(double sigmaS, int pathSpp, int splitSpp) {
     std::printf("  sigma_s %.0f/mm: path %.1f s, split %.1f s (direct part %.3g of %.3g e-)\n", sigmaS, path.seconds, split.seconds,
                 split.directElectrons, split.directElectrons + split.pathElectrons);
     EXPECT_GT(split.directElectrons, 0.0);
-    if (sigmaS > 0) EXPECT_GT(split.pathElectrons, 0.01 * split.directElectrons);  // both parts carry signal
+    if (sigmaS > 0) {
+        EXPECT_GT(split.pathElectrons, 0.01 * split.directElectrons);  // both parts carry signal
+    }
     // The whole image and its four quadrants.
     const int h = kSize / 2;
     for (const auto& [x0, y0, size] : {std::tuple{0, 0, kSize}, {0, 0, h}, {h, 0, h}, {0, h, h}, {h, h, h}}) {
@@ -108,6 +113,47 @@ void expectSameImage(double sigmaS, int pathSpp, int splitSpp) {
 TEST(SplitEstimator, MatchesThePathEstimatorInClearTissue) { expectSameImage(0.0, 256, 4); }
 
 TEST(SplitEstimator, MatchesThePathEstimatorInScatteringTissue) { expectSameImage(2.0, 1024, 512); }
+
+// Adaptive sampling (AcquireOptions::noiseRatio) decides each pixel's number of paths from pilot paths
+// it then discards, so its mean is that of the fixed-spp estimator; it spends the paths where the
+// noise is, and a target every pixel meets at `spp` changes nothing.
+double medianMcOverCamera(const optics::PlaneImage& r) {
+    std::vector<double> e = r.electrons;
+    std::sort(e.begin(), e.end());
+    const double cut = e[static_cast<size_t>(0.9 * (e.size() - 1))];
+    std::vector<double> ratio;
+    for (size_t i = 0; i < r.electrons.size(); ++i)
+        if (r.electrons[i] >= cut) ratio.push_back(r.stderrElectrons[i] * r.stderrElectrons[i] / (r.electrons[i] + 0.05 + 1.4 * 1.4));
+    std::nth_element(ratio.begin(), ratio.begin() + static_cast<std::ptrdiff_t>(ratio.size() / 2), ratio.end());
+    return ratio[ratio.size() / 2];
+}
+
+TEST(AdaptiveSampling, KeepsTheMeanAndSpendsPathsWhereTheNoiseIs) {
+    const Scene scene = filamentScene(2.0);
+    const optics::PlaneImage fixed = render(scene, optics::Estimator::Path, 256, 21);
+    // Far more photoelectrons than a camera counts: the target needs many paths in bright pixels.
+    const optics::PlaneImage adaptive = render(scene, optics::Estimator::Path, 16, 22, 0.002);
+    const double spent = double(adaptive.pathSamples) / adaptive.electrons.size();
+    std::printf("  fixed 256 spp: %.1f s, median MC/camera variance %.3g; adaptive: %.1f paths per pixel (+%.0f pilot), %.1f s, %.3g\n",
+                fixed.seconds, medianMcOverCamera(fixed), spent, double(adaptive.pilotSamples) / adaptive.electrons.size(), adaptive.seconds,
+                medianMcOverCamera(adaptive));
+    EXPECT_GT(spent, 16.0);
+    EXPECT_LT(spent, 1024.0);
+    EXPECT_EQ(adaptive.pilotSamples, 16 * adaptive.electrons.size());
+    EXPECT_LT(medianMcOverCamera(adaptive), medianMcOverCamera(fixed));
+    const CropSum a = crop(fixed, 0, 0, kSize), b = crop(adaptive, 0, 0, kSize);
+    const double z = (b.sum - a.sum) / std::sqrt(a.variance + b.variance);
+    std::printf("  image sum: fixed %.5g +- %.2g, adaptive %.5g +- %.2g, z = %+.2f\n", a.sum, std::sqrt(a.variance), b.sum, std::sqrt(b.variance), z);
+    EXPECT_LT(std::abs(z), 4.0);
+}
+
+TEST(AdaptiveSampling, ALooseTargetChangesNothing) {
+    const Scene scene = filamentScene(0.0);
+    const optics::PlaneImage fixed = render(scene, optics::Estimator::Split, 4, 31);
+    const optics::PlaneImage adaptive = render(scene, optics::Estimator::Split, 4, 31, 1e6);
+    EXPECT_EQ(adaptive.electrons, fixed.electrons);
+    EXPECT_EQ(adaptive.pathSamples, fixed.pathSamples);
+}
 
 }  // namespace
 }  // namespace fluorosim

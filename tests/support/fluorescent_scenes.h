@@ -76,4 +76,13 @@ inline void addMediumBox(Scene& scene, const Vec3& lo, const Vec3& hi, int mediu
     scene.shapes.push_back(info);
 }
 
+// A bath of `medium` filling the cube [-half, half]³ with a smooth dielectric surface (vacuum outside):
+// where light sheets enter and the immersion objective dips in.
+inline void addBath(Scene& scene, double half, int medium) {
+    addMediumBox(scene, Vec3(-half, -half, -half), Vec3(half, half, half), medium);
+    scene.shapes.back().material = static_cast<int>(scene.materials.size());
+    scene.materials.push_back(makeDielectric(0.0));
+    scene.materialNames.push_back("bath surface");
+}
+
 }  // namespace fluorosim::testing
