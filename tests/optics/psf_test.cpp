@@ -59,8 +59,7 @@ TEST(AiryPattern, BeadInFocusHasTheDiffractionLimitedWidth) {
         for (double na : {0.5, 1.0}) {
             // Sub-resolution beads: 0.16 µm at NA 0.5, 0.08 µm at NA 1 (where the bead's depth would
             // otherwise add geometric blur across the wide cone). Hits per pixel scale with (R NA)², so
-            // NA 0.5 also gets twice the samples. The path estimator alone gave ratios within 2 % for
-            // seeds 9, 1 and 2 (about 1 % of noise); the split estimator gives 0.999/1.002/0.998/0.998.
+            // NA 0.5 also gets twice the samples. The tolerance is 4 standard errors of the width.
             const double radius = na < 0.7 ? 8e-5 : 4e-5;
             const Fluorophore dye("narrow", TabulatedSpectrum({440, 450, 500, 510}, {0, 1, 1, 0}), 70000,
                                   TabulatedSpectrum({emission - 3, emission, emission + 3}, {0, 1, 0}), 0.9);
@@ -91,15 +90,19 @@ TEST(AiryPattern, BeadInFocusHasTheDiffractionLimitedWidth) {
             objective.magnification = 6.5e-3 / pixel;
             objective.workingDistanceMm = 0.05;
             optics::DetectorOptions detector;
-            optics::AcquireOptions o;
             // The split estimator (the default) sees the bead through its direct part, so its samples
             // carry the budget; the path part sees nothing here but checks that it adds nothing.
+            optics::AcquireOptions o;
             o.directSpp = na < 0.7 ? 240000 : 120000;
             o.spp = 16;
             o.seed = 9;
             const optics::PlaneImage r = optics::renderPlane(scene, objective, optics::FocalPlane{}, optics::Filter::open(), detector, 25, 1, o);
-            std::vector<double> row(25);
-            for (int x = 0; x < 25; ++x) row[x] = 0.5 * (r.electrons[x] + r.electrons[24 - x]);  // symmetric
+            auto symmetric = [](const std::vector<double>& v) {
+                std::vector<double> s(25);
+                for (int x = 0; x < 25; ++x) s[static_cast<size_t>(x)] = 0.5 * (v[static_cast<size_t>(x)] + v[static_cast<size_t>(24 - x)]);
+                return s;
+            };
+            const std::vector<double> row = symmetric(r.electrons);
 
             // The model row: Airy ⊗ projected thickness, averaged over each pixel (4 x 4 points).
             std::vector<double> expected(25, 0.0);
@@ -117,9 +120,23 @@ TEST(AiryPattern, BeadInFocusHasTheDiffractionLimitedWidth) {
                             }
                     }
             const double measured = fwhm(row, pixel), predicted = fwhm(expected, pixel);
-            std::printf("  emission %.0f nm, NA %.1f: bead FWHM %.4f um, model %.4f um (Airy alone %.4f um), ratio %.4f (%.1f s)\n", emission, na,
-                        measured * 1e3, predicted * 1e3, model * 1e3, measured / predicted, r.seconds);
-            EXPECT_NEAR(measured / predicted, 1.0, 0.02);
+            // The width's standard error by the delta method: its derivative with respect to each
+            // pixel (finite differences through the symmetrization) times the pixel's standard error.
+            // The direct part's standard errors treat its Owen-scrambled Sobol' points as independent,
+            // so they overstate the error (replicas at an eighth of the points each read about 5x
+            // less); the bound is conservative.
+            double variance = 0;
+            for (size_t x = 0; x < 25; ++x) {
+                std::vector<double> moved = r.electrons;
+                const double h = 1e-3 * r.stderrElectrons[x] + 1e-12;
+                moved[x] += h;
+                variance += std::pow((fwhm(symmetric(moved), pixel) - measured) / h * r.stderrElectrons[x], 2);
+            }
+            const double stderrRatio = std::sqrt(variance) / predicted;
+            std::printf("  emission %.0f nm, NA %.1f: bead FWHM %.4f um, model %.4f um (Airy alone %.4f um), ratio %.4f +- %.4f (%.1f s)\n",
+                        emission, na, measured * 1e3, predicted * 1e3, model * 1e3, measured / predicted, stderrRatio, r.seconds);
+            EXPECT_LT(stderrRatio, 0.02) << "the check must be sharp";
+            EXPECT_NEAR(measured / predicted, 1.0, 4 * stderrRatio);
         }
 }
 
