@@ -192,7 +192,15 @@ void runAcquire(const AcquireArgs& a) {
     }
     fs::remove(checkpointPath);
     float maxE = 0;
-    for (float e : stack.expected) maxE = std::max(maxE, e);
+    size_t saturated = 0, saturatedOutliers = 0;  // above the full well; of those, within 4 standard errors of it
+    for (size_t i = 0; i < stack.expected.size(); ++i) {
+        const float e = stack.expected[i];
+        maxE = std::max(maxE, e);
+        if (e > m.detector.fullWellElectrons) {
+            ++saturated;
+            if (e - 4 * stack.stderrElectrons[i] < m.detector.fullWellElectrons) ++saturatedOutliers;
+        }
+    }
     const double vertices = double(stats.scatteringEvents + stats.surfaceBounces) / std::max<double>(1.0, double(stats.paths));
     const nlohmann::json summary = {{"stack", out.counts.string()},
                                     {"expected", out.expected.string()},
@@ -228,9 +236,14 @@ void runAcquire(const AcquireArgs& a) {
                                     {"max_expected_electrons", maxE},
                                     {"full_well_electrons", m.detector.fullWellElectrons}};
     std::printf("%s\n", summary.dump().c_str());
-    if (maxE > m.detector.fullWellElectrons)
-        std::fprintf(stderr, "fluorosim: warning: the brightest pixel expects %.3g e-, above the full well (%.3g e-): the camera saturates\n",
-                     double(maxE), m.detector.fullWellElectrons);
+    if (saturated > 0)
+        std::fprintf(stderr,
+                     "fluorosim: warning: %zu of %zu pixels expect more than the full well (%.3g e-; brightest %.3g e-): the camera saturates "
+                     "there%s\n",
+                     saturated, stack.expected.size(), m.detector.fullWellElectrons, double(maxE),
+                     saturatedOutliers == saturated ? "; each is within 4 Monte Carlo standard errors of the full well (rare large samples: "
+                                                      "more paths, not less exposure, may be what they need)"
+                                                    : "");
 }
 
 }  // namespace
