@@ -144,7 +144,7 @@ struct Viewer::Impl {
     bool onSlider(int x, int y) const;
     void dragSlider(int x);
     void setupSliceView(View& v, ViewPreset kind, int normalAxis);
-    void setupImageView(View& v, ViewPreset kind, const char* title, bool pixels);
+    void setupImageView(View& v, ViewPreset kind, bool pixels);
     // Updating.
     void layout();
     void updateVolumeProperty();
