@@ -6,6 +6,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <cmath>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -93,7 +94,8 @@ py::dict renderScene(const py::object& sceneArg, std::optional<int> spp, std::op
 }
 
 py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, const std::optional<std::string>& step, std::optional<int> spp,
-                 std::optional<int64_t> seed, const std::vector<std::string>& channels, int threads, const std::optional<std::string>& base) {
+                 std::optional<int64_t> seed, const std::vector<std::string>& channels, int threads, const std::optional<std::string>& base,
+                 const std::string& estimator, std::optional<int> directSpp, std::optional<double> noiseRatio, std::optional<int> maxSpp) {
     const Scene scene = loadAnyScene(sceneArg, base);
     optics::Microscope m = optics::Microscope::fromScene(scene, database());
     if (planes) {
@@ -109,6 +111,13 @@ py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, con
     if (o.spp < 1 || o.spp > (1 << 24)) throw ConfigError("--spp: must lie in [1, 16777216], got " + std::to_string(o.spp));
     o.seed = seed ? static_cast<uint64_t>(*seed) : scene.render.seed;
     o.threads = threads;
+    const auto chosen = optics::estimatorFromName(estimator);
+    if (!chosen) throw ConfigError("--estimator: expected \"split\" or \"path\", got \"" + estimator + "\"");
+    o.estimator = *chosen;
+    if (directSpp) o.directSpp = *directSpp;
+    o.noiseRatio = noiseRatio;
+    if (maxSpp) o.maxSpp = *maxSpp;
+    o.validate();
     const std::vector<size_t> selected = m.selectChannels(channels, "--channels");
     optics::Stack stack = optics::emptyStack(m, selected);
     {
@@ -127,7 +136,43 @@ py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, con
     out["z_step_um"] = m.stack.stepMm * 1e3;
     out["spp"] = o.spp;
     out["seed"] = o.seed;
+    out["estimator"] = optics::estimatorName(o.estimator);
     return out;
+}
+
+std::vector<double> checkedWavelengths(const std::vector<double>& wavelengthsNm) {
+    for (double l : wavelengthsNm)
+        if (!(l > 0) || !std::isfinite(l)) throw ConfigError("wavelengths_nm: must be positive and finite, got " + std::to_string(l));
+    return wavelengthsNm;
+}
+
+// A dye of the database on the caller's wavelengths: ε(λ) in M^-1 cm^-1 and the emission density in 1/nm.
+py::dict dyeSpectra(const std::string& name, const std::vector<double>& wavelengthsNm) {
+    const Fluorophore f = database().fluorophore(name);
+    const std::vector<double> l = checkedWavelengths(wavelengthsNm);
+    std::vector<double> extinction, emission;
+    for (double x : l) {
+        extinction.push_back(f.molarExtinction(x));
+        emission.push_back(f.emissionPdf(x));
+    }
+    const auto n = static_cast<py::ssize_t>(l.size());
+    py::dict out;
+    out["id"] = f.id();
+    out["wavelengths_nm"] = toArray(l, {n});
+    out["molar_extinction"] = toArray(extinction, {n});
+    out["emission_pdf"] = toArray(emission, {n});
+    out["extinction_peak"] = f.extinctionPeak();
+    out["quantum_yield"] = f.quantumYield();
+    return out;
+}
+
+// A filter of the database: its transmission (0..1) on the caller's wavelengths.
+py::array_t<double> filterTransmission(const std::string& name, const std::vector<double>& wavelengthsNm) {
+    const TabulatedSpectrum t = database().filter(name);
+    const std::vector<double> l = checkedWavelengths(wavelengthsNm);
+    std::vector<double> values;
+    for (double x : l) values.push_back(t(x));
+    return toArray(values, {static_cast<py::ssize_t>(l.size())});
 }
 
 }  // namespace
@@ -152,8 +197,16 @@ PYBIND11_MODULE(fluorosim, mod) {
             "wavelengths_nm, spp, seed, seconds, paths, non_finite_samples.");
     mod.def("acquire", &acquireScene, py::arg("scene"), py::kw_only(), py::arg("planes") = py::none(), py::arg("step") = py::none(),
             py::arg("spp") = py::none(), py::arg("seed") = py::none(), py::arg("channels") = std::vector<std::string>{},
-            py::arg("threads") = 0, py::arg("base") = py::none(),
+            py::arg("threads") = 0, py::arg("base") = py::none(), py::arg("estimator") = "split", py::arg("direct_spp") = py::none(),
+            py::arg("noise_ratio") = py::none(), py::arg("max_spp") = py::none(),
             "Acquire a light-sheet z-stack of a scene with a microscope block. Returns a dict: counts (uint16), expected and "
             "stderr (float32), each (channel, z, y, x); channels, pixel_size_um, z_step_um, spp, seed. Same numbers as "
-            "`fluorosim acquire` with the same options.");
+            "`fluorosim acquire` with the same options (estimator: split or path; noise_ratio and max_spp: adaptive sampling).");
+    mod.def("dyes", [] { return database().dyeIds(); }, "The dyes of the spectral database.");
+    mod.def("filters", [] { return database().filterNames(); }, "The filters of the spectral database.");
+    mod.def("dye", &dyeSpectra, py::arg("name"), py::arg("wavelengths_nm"),
+            "A dye on the given wavelengths: dict with molar_extinction (M^-1 cm^-1), emission_pdf (1/nm), extinction_peak, "
+            "quantum_yield, id.");
+    mod.def("filter_transmission", &filterTransmission, py::arg("name"), py::arg("wavelengths_nm"),
+            "A filter's transmission (0..1) on the given wavelengths.");
 }

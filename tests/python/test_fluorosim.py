@@ -72,6 +72,40 @@ def test_acquire_gives_the_cli_stack(tmp_path):
     np.testing.assert_array_equal(from_dict["counts"], stack["counts"])
 
 
+def test_acquire_takes_the_cli_estimator_options(tmp_path):
+    scene = tmp_path / "beads.json"
+    scene.write_text(json.dumps(beads()))
+    options = ["--planes", "2", "--spp", "4", "--seed", "5", "--estimator", "path"]
+    run = cli("acquire", scene, "-o", tmp_path / "p.ome.tif", *options)
+    assert run.returncode == 0, run.stderr
+    stack = fluorosim.acquire(str(scene), planes=2, spp=4, seed=5, estimator="path")
+    assert stack["estimator"] == "path"
+    np.testing.assert_array_equal(stack["expected"].ravel(), tifffile.imread(tmp_path / "p.expected.ome.tif").ravel())
+    options = ["--planes", "1", "--spp", "4", "--seed", "5", "--noise-ratio", "0.5", "--max-spp", "64", "--direct-spp", "32"]
+    run = cli("acquire", scene, "-o", tmp_path / "a.ome.tif", *options)
+    assert run.returncode == 0, run.stderr
+    adaptive = fluorosim.acquire(str(scene), planes=1, spp=4, seed=5, noise_ratio=0.5, max_spp=64, direct_spp=32)
+    np.testing.assert_array_equal(adaptive["expected"].ravel(), tifffile.imread(tmp_path / "a.expected.ome.tif").ravel())
+    with pytest.raises(ValueError, match="--estimator"):
+        fluorosim.acquire(str(scene), planes=1, estimator="fast")
+
+
+def test_the_spectral_database_as_arrays():
+    assert "alexa_fluor_488" in fluorosim.dyes() and "semrock_FF01-525-45" in fluorosim.filters()
+    wl = np.arange(400.0, 751.0, 1.0)
+    af488 = fluorosim.dye("AF488", wl)  # an alias of alexa_fluor_488
+    assert af488["molar_extinction"].shape == wl.shape
+    assert af488["molar_extinction"].max() == pytest.approx(af488["extinction_peak"], rel=0.02)
+    assert np.trapz(af488["emission_pdf"], wl) == pytest.approx(1.0, abs=0.01)  # a density over the range it covers
+    assert 480 < wl[np.argmax(af488["molar_extinction"])] < 510 and 505 < wl[np.argmax(af488["emission_pdf"])] < 535
+    t = fluorosim.filter_transmission("semrock_FF01-525-45", wl)
+    assert t[wl == 525][0] > 0.9 and t[wl == 450][0] < 1e-3
+    with pytest.raises(ValueError):
+        fluorosim.dye("no such dye", wl)
+    with pytest.raises(ValueError, match="wavelengths_nm"):
+        fluorosim.filter_transmission("semrock_FF01-525-45", [500.0, -1.0])
+
+
 def test_render_from_a_dict_matches_the_file_and_has_its_wavelengths(tmp_path):
     path = tmp_path / "small.json"
     path.write_text(json.dumps(SMALL))
