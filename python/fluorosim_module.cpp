@@ -19,6 +19,7 @@
 #include "render/fluorescence.h"
 #include "render/renderer.h"
 #include "scene_files.h"
+#include "voxelize_files.h"
 
 namespace py = pybind11;
 namespace fs = std::filesystem;
@@ -175,6 +176,47 @@ py::array_t<double> filterTransmission(const std::string& name, const std::vecto
     return toArray(values, {static_cast<py::ssize_t>(l.size())});
 }
 
+// `fluorosim voxelize` from Python: the same checks and messages, the grids written to `output`.
+py::dict voxelizeSwc(const std::vector<std::string>& swc, const std::string& voxel, const std::vector<std::string>& dyes,
+                     const std::vector<std::string>& concentrations, const std::string& output, const std::vector<std::string>& grids,
+                     const std::string& mode, const std::optional<std::string>& membraneThickness, int supersampling, int threads) {
+    app::VoxelizeArgs a;
+    a.swc = swc;
+    a.voxel = voxel;
+    a.dyes = dyes;
+    a.concentrations = concentrations;
+    a.output = output;
+    a.grids = grids;
+    a.mode = mode;
+    a.membraneThickness = membraneThickness;
+    a.supersampling = supersampling;
+    a.threads = threads;
+    if (a.swc.empty()) throw ConfigError("swc: give at least one SWC file");
+    VoxelizeSummary s;
+    {
+        py::gil_scoped_release release;
+        s = app::voxelizeFiles(a, database(), nullptr);
+    }
+    py::list gridList;
+    for (const VoxelizedGridSummary& g : s.grids) {
+        py::dict d;
+        d["name"] = g.name;
+        d["units"] = g.units;
+        d["active_voxels"] = g.activeVoxels;
+        d["covered_volume_um3"] = g.coveredVolumeUm3;
+        d["analytic_volume_um3"] = g.analyticVolumeUm3;
+        d["max_value"] = g.maxValue;
+        gridList.append(d);
+    }
+    py::dict out;
+    out["output"] = output;
+    out["grids"] = gridList;
+    out["label_voxels"] = s.labelVoxels;
+    out["voxel_size_um"] = s.voxelSizeMm * 1e3;
+    out["seconds"] = s.seconds;
+    return out;
+}
+
 }  // namespace
 
 PYBIND11_MODULE(fluorosim, mod) {
@@ -202,6 +244,12 @@ PYBIND11_MODULE(fluorosim, mod) {
             "Acquire a light-sheet z-stack of a scene with a microscope block. Returns a dict: counts (uint16), expected and "
             "stderr (float32), each (channel, z, y, x); channels, pixel_size_um, z_step_um, spp, seed. Same numbers as "
             "`fluorosim acquire` with the same options (estimator: split or path; noise_ratio and max_spp: adaptive sampling).");
+    mod.def("voxelize", &voxelizeSwc, py::arg("swc"), py::kw_only(), py::arg("voxel"), py::arg("dyes"), py::arg("concentrations"),
+            py::arg("output"), py::arg("grids") = std::vector<std::string>{}, py::arg("mode") = "filled",
+            py::arg("membrane_thickness") = py::none(), py::arg("supersampling") = 4, py::arg("threads") = 0,
+            "Voxelize SWC neurons into an OpenVDB file, as `fluorosim voxelize` (one dye and concentration, or one per file). "
+            "Returns a dict: output, grids [{name, units, active_voxels, covered_volume_um3, analytic_volume_um3, max_value}], "
+            "label_voxels, voxel_size_um, seconds.");
     mod.def("dyes", [] { return database().dyeIds(); }, "The dyes of the spectral database.");
     mod.def("filters", [] { return database().filterNames(); }, "The filters of the spectral database.");
     mod.def("dye", &dyeSpectra, py::arg("name"), py::arg("wavelengths_nm"),

@@ -90,6 +90,21 @@ def test_acquire_takes_the_cli_estimator_options(tmp_path):
         fluorosim.acquire(str(scene), planes=1, estimator="fast")
 
 
+def test_voxelize_writes_the_cli_grids(tmp_path):
+    swc = [str(SOURCE / "samples" / "neurons" / "C231296A-P3.CNG.swc")]
+    run = cli("voxelize", *swc, "--voxel", "1um", "--dye", "AF594", "--concentration", "10uM", "-o", tmp_path / "cli.vdb")
+    assert run.returncode == 0, run.stderr
+    s = fluorosim.voxelize(swc, voxel="1um", dyes=["AF594"], concentrations=["10uM"], output=str(tmp_path / "py.vdb"))
+    (grid,) = s["grids"]
+    # The files differ only in OpenVDB's per-file UUID; the CLI's summary line gives the same grid.
+    assert f"grid alexa_fluor_594 [uM]: {grid['active_voxels']} voxels, covered {grid['covered_volume_um3']:.6g} um^3" in run.stdout
+    assert (tmp_path / "cli.vdb").stat().st_size == (tmp_path / "py.vdb").stat().st_size
+    assert grid["name"] == "alexa_fluor_594" and grid["units"] == "uM" and grid["max_value"] == pytest.approx(10, rel=1e-6)
+    assert grid["covered_volume_um3"] == pytest.approx(grid["analytic_volume_um3"], rel=0.05)
+    with pytest.raises(ValueError, match="--voxel"):
+        fluorosim.voxelize(swc, voxel="-1um", dyes=["AF594"], concentrations=["10uM"], output=str(tmp_path / "x.vdb"))
+
+
 def test_the_spectral_database_as_arrays():
     assert "alexa_fluor_488" in fluorosim.dyes() and "semrock_FF01-525-45" in fluorosim.filters()
     wl = np.arange(400.0, 751.0, 1.0)
