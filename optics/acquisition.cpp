@@ -128,20 +128,23 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
     r.stderrElectrons.assign(r.electrons.size(), 0.0);
     r.directStderr.assign(r.electrons.size(), 0.0);
     r.pathStderr.assign(r.electrons.size(), 0.0);
-    std::vector<PathStats> rowStats(static_cast<size_t>(height));
-    std::vector<double> rowLargest(static_cast<size_t>(height), 0.0), rowDirect(static_cast<size_t>(height), 0.0),
-        rowPath(static_cast<size_t>(height), 0.0), rowDirectSeconds(static_cast<size_t>(height), 0.0),
-        rowPathSeconds(static_cast<size_t>(height), 0.0);
-    std::vector<uint64_t> rowSamples(static_cast<size_t>(height), 0), rowPilots(static_cast<size_t>(height), 0);
+    // Each row's totals, kept apart so that threads never share them; summed into the image at the end.
+    struct RowTotals {
+        PathStats stats;
+        double largest = 0, direct = 0, path = 0, directSeconds = 0, pathSeconds = 0;
+        uint64_t samples = 0, pilots = 0;
+        bool done = false;
+    };
+    std::vector<RowTotals> rows(static_cast<size_t>(height));
     // Dark electrons of the exposure: part of the camera noise an adaptive target is relative to.
     const double darkElectrons = detector.darkCurrentElectronsPerS * detector.exposureS;
-    std::vector<char> rowDone(static_cast<size_t>(height), 0);
     int rowsDone = 0;
     std::mutex progressMutex;  // the callback is called from one thread at a time
     parallelFor(static_cast<size_t>(height), o.threads, [&](size_t yRow) {
         if (o.cancel && o.cancel->load()) return;
         const int y = static_cast<int>(yRow);
-        PathStats& stats = rowStats[yRow];
+        RowTotals& row = rows[yRow];
+        PathStats& stats = row.stats;
         for (int x = 0; x < width; ++x) {
             const size_t pixel = yRow * static_cast<size_t>(width) + static_cast<size_t>(x);
             PixelTally paths, directTally;
@@ -208,39 +211,39 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                 const double room = target - directVariance;
                 const double wanted = room > 0 ? std::ceil(perPath / room) : double(o.maxSpp);
                 n = static_cast<int>(std::clamp(wanted, double(o.spp), double(o.maxSpp)));
-                rowPilots[yRow] += static_cast<uint64_t>(o.pilotSpp);
+                row.pilots += static_cast<uint64_t>(o.pilotSpp);
             }
             for (int s = 0; s < n; ++s) {
                 const double e = pathSample(static_cast<uint64_t>(s));
                 paths.add(e);
-                rowLargest[yRow] = std::max(rowLargest[yRow], e);
+                row.largest = std::max(row.largest, e);
             }
-            rowSamples[yRow] += static_cast<uint64_t>(n);
+            row.samples += static_cast<uint64_t>(n);
             const auto t2 = std::chrono::steady_clock::now();
-            rowDirectSeconds[yRow] += std::chrono::duration<double>(t1 - t0).count();
-            rowPathSeconds[yRow] += std::chrono::duration<double>(t2 - t1).count();
+            row.directSeconds += std::chrono::duration<double>(t1 - t0).count();
+            row.pathSeconds += std::chrono::duration<double>(t2 - t1).count();
             r.directStderr[pixel] = std::sqrt(directVariance);
             r.pathStderr[pixel] = std::sqrt(paths.varianceOfMean());
             r.electrons[pixel] = paths.mean() + directTally.mean();
             r.stderrElectrons[pixel] = std::sqrt(paths.varianceOfMean() + directVariance);
-            rowDirect[yRow] += directTally.mean();
-            rowPath[yRow] += paths.mean();
+            row.direct += directTally.mean();
+            row.path += paths.mean();
         }
-        rowDone[yRow] = 1;
+        row.done = true;
         const std::lock_guard<std::mutex> lock(progressMutex);
         ++rowsDone;
         if (o.progress) o.progress(double(rowsDone) / height);
     });
-    for (size_t y = 0; y < rowStats.size(); ++y) {
-        r.stats.add(rowStats[y]);
-        r.largestSample = std::max(r.largestSample, rowLargest[y]);
-        r.complete = r.complete && rowDone[y];
-        r.directElectrons += rowDirect[y];
-        r.pathElectrons += rowPath[y];
-        r.directSeconds += rowDirectSeconds[y];
-        r.pathSeconds += rowPathSeconds[y];
-        r.pathSamples += rowSamples[y];
-        r.pilotSamples += rowPilots[y];
+    for (const RowTotals& row : rows) {
+        r.stats.add(row.stats);
+        r.largestSample = std::max(r.largestSample, row.largest);
+        r.complete = r.complete && row.done;
+        r.directElectrons += row.direct;
+        r.pathElectrons += row.path;
+        r.directSeconds += row.directSeconds;
+        r.pathSeconds += row.pathSeconds;
+        r.pathSamples += row.samples;
+        r.pilotSamples += row.pilots;
     }
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return r;

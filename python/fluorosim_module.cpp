@@ -18,6 +18,7 @@
 #include "optics/acquisition.h"
 #include "render/fluorescence.h"
 #include "render/renderer.h"
+#include "acquire_request.h"
 #include "scene_files.h"
 #include "voxelize_files.h"
 
@@ -97,28 +98,20 @@ py::dict renderScene(const py::object& sceneArg, std::optional<int> spp, std::op
 py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, const std::optional<std::string>& step, std::optional<int> spp,
                  std::optional<int64_t> seed, const std::vector<std::string>& channels, int threads, const std::optional<std::string>& base,
                  const std::string& estimator, std::optional<int> directSpp, std::optional<double> noiseRatio, std::optional<int> maxSpp) {
+    app::AcquireRequest request;
+    request.planes = planes;
+    request.step = step;
+    request.spp = spp;
+    request.seed = seed;
+    request.threads = threads;
+    request.estimator = estimator;
+    request.directSpp = directSpp;
+    request.noiseRatio = noiseRatio;
+    request.maxSpp = maxSpp;
+    app::checkAcquireRequest(request);
     const Scene scene = loadAnyScene(sceneArg, base);
     optics::Microscope m = optics::Microscope::fromScene(scene, database());
-    if (planes) {
-        if (*planes < 1 || *planes > 4096) throw ConfigError("--planes: must lie in [1, 4096], got " + std::to_string(*planes));
-        m.stack.planes = *planes;
-    }
-    if (step) m.stack.stepMm = parseQuantity(*step, Dimension::Length, "--step");
-    if (!(m.stack.stepMm > 0)) throw ConfigError("--step: must be positive, got " + step.value_or(""));
-    m.validate(scene);
-    if (seed && *seed < 0) throw ConfigError("--seed: must be >= 0, got " + std::to_string(*seed));
-    optics::AcquireOptions o;
-    o.spp = spp.value_or(scene.render.spp);
-    if (o.spp < 1 || o.spp > (1 << 24)) throw ConfigError("--spp: must lie in [1, 16777216], got " + std::to_string(o.spp));
-    o.seed = seed ? static_cast<uint64_t>(*seed) : scene.render.seed;
-    o.threads = threads;
-    const auto chosen = optics::estimatorFromName(estimator);
-    if (!chosen) throw ConfigError("--estimator: expected \"split\" or \"path\", got \"" + estimator + "\"");
-    o.estimator = *chosen;
-    if (directSpp) o.directSpp = *directSpp;
-    o.noiseRatio = noiseRatio;
-    if (maxSpp) o.maxSpp = *maxSpp;
-    o.validate();
+    const optics::AcquireOptions o = app::applyAcquireRequest(request, scene, m);
     const std::vector<size_t> selected = m.selectChannels(channels, "--channels");
     optics::Stack stack = optics::emptyStack(m, selected);
     {

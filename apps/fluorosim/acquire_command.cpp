@@ -18,6 +18,7 @@
 #include "core/errors.h"
 #include "core/math.h"
 #include "core/units.h"
+#include "acquire_request.h"
 #include "distributed_acquire.h"
 #include "optics/acquisition.h"
 #include "optics/stack_files.h"
@@ -32,16 +33,9 @@ namespace {
 std::atomic<bool> gCancel{false};
 extern "C" void onAcquireSignal(int) { gCancel.store(true); }
 
-struct AcquireArgs {
+struct AcquireArgs : AcquireRequest {
     std::string scene, output;
-    std::optional<int> planes, spp, directSpp, maxSpp;
-    std::optional<double> noiseRatio;
-    std::string estimator = "split";
-    std::optional<std::string> step;
-    std::optional<int64_t> seed;
-    int threads = 0;
     bool resume = false;
-    std::vector<std::string> channels;  // names to acquire (default: all)
 };
 
 // Everything that determines the stack, so that --resume never mixes two different runs.
@@ -67,8 +61,7 @@ double median(std::vector<double> v) {
 }
 
 void runAcquire(const AcquireArgs& a) {
-    if (a.threads < 0 || a.threads > 4096) throw ConfigError("--threads: must lie in [0, 4096], got " + std::to_string(a.threads));
-    if (a.seed && *a.seed < 0) throw ConfigError("--seed: must be >= 0, got " + std::to_string(*a.seed));
+    checkAcquireRequest(a);
     const spectra::Database db;
     const Scene scene = loadSceneFile(a.scene, db);
     if (cluster::isRoot())  // under MPI every rank loads the scene; one of them speaks
@@ -76,39 +69,7 @@ void runAcquire(const AcquireArgs& a) {
     optics::Microscope m = optics::Microscope::fromScene(scene, db);
     if (cluster::isRoot())
         for (const std::string& w : m.warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
-    if (a.planes) {
-        if (*a.planes < 1 || *a.planes > 4096) throw ConfigError("--planes: must lie in [1, 4096], got " + std::to_string(*a.planes));
-        m.stack.planes = *a.planes;
-    }
-    if (a.step) m.stack.stepMm = parseQuantity(*a.step, Dimension::Length, "--step");
-    if (!(m.stack.stepMm > 0)) throw ConfigError("--step: must be positive, got " + *a.step);
-    m.validate(scene);
-
-    optics::AcquireOptions o;
-    o.spp = a.spp.value_or(scene.render.spp);
-    if (o.spp < 1 || o.spp > (1 << 24)) throw ConfigError("--spp: must lie in [1, 16777216], got " + std::to_string(o.spp));
-    o.seed = a.seed ? static_cast<uint64_t>(*a.seed) : scene.render.seed;
-    const auto estimator = optics::estimatorFromName(a.estimator);
-    if (!estimator) throw ConfigError("--estimator: expected \"split\" or \"path\", got \"" + a.estimator + "\"");
-    o.estimator = *estimator;
-    if (a.directSpp) {
-        if (*a.directSpp < 1 || *a.directSpp > (1 << 24))
-            throw ConfigError("--direct-spp: must lie in [1, 16777216], got " + std::to_string(*a.directSpp));
-        o.directSpp = *a.directSpp;
-    }
-    if (a.noiseRatio) {
-        if (!(*a.noiseRatio > 0) || !std::isfinite(*a.noiseRatio))
-            throw ConfigError("--noise-ratio: must be positive and finite, got " + std::to_string(*a.noiseRatio));
-        o.noiseRatio = *a.noiseRatio;
-    }
-    if (a.maxSpp) {
-        if (!a.noiseRatio) throw ConfigError("--max-spp: only with --noise-ratio (adaptive sampling)");
-        if (*a.maxSpp < o.spp || *a.maxSpp > (1 << 24))
-            throw ConfigError("--max-spp: must lie in [spp = " + std::to_string(o.spp) + ", 16777216], got " + std::to_string(*a.maxSpp));
-        o.maxSpp = *a.maxSpp;
-    }
-    if (o.noiseRatio) o.maxSpp = std::max(o.maxSpp, o.spp);
-    o.threads = a.threads;
+    optics::AcquireOptions o = applyAcquireRequest(a, scene, m);
     o.cancel = &gCancel;
 
     const std::vector<size_t> selected = m.selectChannels(a.channels, "--channels");

@@ -1,21 +1,11 @@
 // `fluorosim voxelize`: SWC neuron morphologies -> OpenVDB dye-concentration grids.
-#include <charconv>
 #include <chrono>
-#include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <memory>
-#include <optional>
-#include <unistd.h>
 
 #include "commands.h"
-#include "core/errors.h"
-#include "core/parallel.h"
-#include "core/units.h"
 #include "database.h"
-#include "morphology/swc.h"
-#include "output_checks.h"
 #include "progress.h"
 #include "volume/voxelize.h"
 #include "voxelize_files.h"

@@ -118,7 +118,8 @@ void DirectBeamEstimator::addSample(Pixel& pixel, const Ray& ray, int medium, co
     const int count = straightSegments(scene_, ray, medium, 0.0, segments);
     const FluorescencePlan& plan = tracer_.fluorescence();
     const bool elastic = component.elasticLine >= 0;
-    std::vector<CorePoint> points;
+    std::vector<CorePoint>& points = pixel.scratch;
+    points.clear();
     for (size_t li = 0; li < lines_.size(); ++li) {
         if (elastic && static_cast<int>(li) != component.elasticLine) continue;
         const BeamLine& line = lines_[li];

@@ -51,6 +51,7 @@ public:
         std::vector<Point> points;
         double sum = 0, sum2 = 0;  // of the samples' transmittance-free estimates
         int samples = 0;
+        std::vector<CorePoint> scratch;  // one sample's core points, reused across samples
     };
     // Adds one sample: a camera ray starting in `medium`, a component, the shift of its stratified
     // points, and `scale` (what the caller multiplies the radiance by, e.g. the étendue).

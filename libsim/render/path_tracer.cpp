@@ -23,6 +23,12 @@ SampledSpectrum clampZero(const SampledSpectrum& s) {
     return r;
 }
 
+// Whether the direct estimator (render/direct_beam.h) covers this light sample at p: a beam at one of
+// its spectral lines (not a continuous beam spectrum), connected from inside the beam's core.
+bool coveredByDirectPart(const LightSample& ls, const Vec3& p, const SampledWavelengths& wl) {
+    return ls.beam && wl.discrete && ls.beamProfile->inCore(p, ls.side, wl.lambda[0]);
+}
+
 }  // namespace
 
 PathTracer::PathTracer(const Scene& scene)
@@ -250,7 +256,7 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double
     if (fluorescence_.model() == FluorescenceModel::Paper) {
         const double uLight = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform();
         if (const auto ls = lights_.sample(p, uLight, u1, u2, wlx);
-            ls && ls->L && ls->pdf > 0 && !(skipBeamCores && ls->beam && wlx.discrete && ls->beamProfile->inCore(p, ls->side, wlx.lambda[0])))
+            ls && ls->L && ls->pdf > 0 && !(skipBeamCores && coveredByDirectPart(*ls, p, wlx)))
             Lx = start * estimateTransmittance(p, ls->p, medium, wlx, rng, nullptr, 0.0, ls->beam, true).T * ls->L * (kInv4Pi / ls->pdf);
     } else {
         Lx = traceFromEmission(p, medium, wlx, start, depth, generation + 1, rng, stats, skipBeamCores).total();
@@ -296,8 +302,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         const double uLight = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform();
         const auto ls = lights_.sample(p, uLight, u1, u2, wl);
         if (!ls || !ls->L || !(ls->pdf > 0)) return SampledSpectrum(0.0);
-        // The direct estimator covers the beams' lines in their cores (not a continuous beam spectrum).
-        if (skipBeamCores && ls->beam && wl.discrete && ls->beamProfile->inCore(p, ls->side, wl.lambda[0])) return SampledSpectrum(0.0);
+        if (skipBeamCores && coveredByDirectPart(*ls, p, wl)) return SampledSpectrum(0.0);
         const auto [fHat, scatterPdf] = evalScatter(ls->wi);
         if (!fHat) return SampledSpectrum(0.0);
         int startMedium = lightMedium;

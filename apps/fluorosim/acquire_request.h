@@ -1,0 +1,75 @@
+#pragma once
+// The options of an acquisition as a user gives them, checked and applied in one place: shared by
+// `fluorosim acquire` and the Python module, so both refuse the same values with the same messages
+// (named by the CLI's options).
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/errors.h"
+#include "core/units.h"
+#include "optics/acquisition.h"
+#include "optics/microscope.h"
+
+namespace fluorosim::app {
+
+struct AcquireRequest {
+    std::optional<int> planes, spp, directSpp, maxSpp;
+    std::optional<double> noiseRatio;
+    std::string estimator = "split";
+    std::optional<std::string> step;
+    std::optional<int64_t> seed;
+    int threads = 0;
+    std::vector<std::string> channels;  // names to acquire (default: all)
+};
+
+// What can be checked before the scene is read.
+inline void checkAcquireRequest(const AcquireRequest& a) {
+    if (a.threads < 0 || a.threads > 4096) throw ConfigError("--threads: must lie in [0, 4096], got " + std::to_string(a.threads));
+    if (a.seed && *a.seed < 0) throw ConfigError("--seed: must be >= 0, got " + std::to_string(*a.seed));
+}
+
+// Applies the stack overrides (planes, step) to `m`, validates it against the scene, and returns the
+// acquisition options. Throws ConfigError naming the option and its value.
+inline optics::AcquireOptions applyAcquireRequest(const AcquireRequest& a, const Scene& scene, optics::Microscope& m) {
+    checkAcquireRequest(a);
+    if (a.planes) {
+        if (*a.planes < 1 || *a.planes > 4096) throw ConfigError("--planes: must lie in [1, 4096], got " + std::to_string(*a.planes));
+        m.stack.planes = *a.planes;
+    }
+    if (a.step) m.stack.stepMm = parseQuantity(*a.step, Dimension::Length, "--step");
+    if (!(m.stack.stepMm > 0)) throw ConfigError("--step: must be positive, got " + a.step.value_or(""));
+    m.validate(scene);
+
+    optics::AcquireOptions o;
+    o.spp = a.spp.value_or(scene.render.spp);
+    if (o.spp < 1 || o.spp > (1 << 24)) throw ConfigError("--spp: must lie in [1, 16777216], got " + std::to_string(o.spp));
+    o.seed = a.seed ? static_cast<uint64_t>(*a.seed) : scene.render.seed;
+    const auto estimator = optics::estimatorFromName(a.estimator);
+    if (!estimator) throw ConfigError("--estimator: expected \"split\" or \"path\", got \"" + a.estimator + "\"");
+    o.estimator = *estimator;
+    if (a.directSpp) {
+        if (*a.directSpp < 1 || *a.directSpp > (1 << 24))
+            throw ConfigError("--direct-spp: must lie in [1, 16777216], got " + std::to_string(*a.directSpp));
+        o.directSpp = *a.directSpp;
+    }
+    if (a.noiseRatio) {
+        if (!(*a.noiseRatio > 0) || !std::isfinite(*a.noiseRatio))
+            throw ConfigError("--noise-ratio: must be positive and finite, got " + std::to_string(*a.noiseRatio));
+        o.noiseRatio = *a.noiseRatio;
+    }
+    if (a.maxSpp) {
+        if (!a.noiseRatio) throw ConfigError("--max-spp: only with --noise-ratio (adaptive sampling)");
+        if (*a.maxSpp < o.spp || *a.maxSpp > (1 << 24))
+            throw ConfigError("--max-spp: must lie in [spp = " + std::to_string(o.spp) + ", 16777216], got " + std::to_string(*a.maxSpp));
+        o.maxSpp = *a.maxSpp;
+    }
+    if (o.noiseRatio) o.maxSpp = std::max(o.maxSpp, o.spp);
+    o.threads = a.threads;
+    return o;
+}
+
+}  // namespace fluorosim::app
