@@ -262,6 +262,12 @@ TEST(AcquireCli, BadNumbersAreRejectedNotCast) {
         {{}, {"--seed", "-1"}, {"--seed", "-1"}},
         {{}, {"--planes", "0"}, {"--planes", "0"}},
         {{}, {"--step", "-1um"}, {"--step"}},
+        {{}, {"--estimator", "fast"}, {"--estimator", "fast"}},
+        {{}, {"--direct-spp", "0"}, {"--direct-spp", "0"}},
+        {{}, {"--noise-ratio", "-0.5"}, {"--noise-ratio", "-0.5"}},
+        {{}, {"--noise-ratio", "inf"}, {"--noise-ratio", "inf"}},
+        {{}, {"--max-spp", "64"}, {"--max-spp", "--noise-ratio"}},
+        {{}, {"--noise-ratio", "0.5", "--max-spp", "0"}, {"--max-spp", "[spp = 1", "0"}},
     };
     for (const auto& [edit, extra, parts] : cases) {
         const auto r = run(edit, extra);

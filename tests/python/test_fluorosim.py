@@ -88,6 +88,10 @@ def test_acquire_takes_the_cli_estimator_options(tmp_path):
     np.testing.assert_array_equal(adaptive["expected"].ravel(), tifffile.imread(tmp_path / "a.expected.ome.tif").ravel())
     with pytest.raises(ValueError, match="--estimator"):
         fluorosim.acquire(str(scene), planes=1, estimator="fast")
+    with pytest.raises(ValueError, match="--noise-ratio: must be positive"):
+        fluorosim.acquire(str(scene), planes=1, noise_ratio=-1.0)
+    with pytest.raises(ValueError, match="--threads"):
+        fluorosim.acquire(str(scene), planes=1, threads=65537)
 
 
 def test_voxelize_writes_the_cli_grids(tmp_path):
