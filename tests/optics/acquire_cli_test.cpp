@@ -275,6 +275,11 @@ TEST(AcquireCli, BadNumbersAreRejectedNotCast) {
         SCOPED_TRACE(parts[0]);
         expectOneLineError(r, parts);
     }
+    {
+        const auto r = runCli(dir, {"acquire", beads(dir, [](json&) {}).string(), "-o", out, "--planes", "1", "--spp", "0"});
+        EXPECT_EQ(r.exitCode, 2) << r.err;
+        expectOneLineError(r, {"--spp", "0"});
+    }
     // A stack of 8192 x 8192 pixels and 4096 planes is refused before anything is allocated.
     const auto r = run([](json& j) {
         j["microscope"]["detector"]["width"] = 8192;
