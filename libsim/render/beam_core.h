@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "media/medium.h"
+#include "render/straight_line.h"
 #include "scene/scene.h"
 
 namespace fluorosim {
@@ -20,15 +21,6 @@ struct BeamLine {
 // Every spectral line of every beam in `lights`.
 std::vector<BeamLine> beamLines(const std::vector<Light>& lights);
 
-// A straight piece of a ray in one medium (not vacuum-like).
-struct RaySegment {
-    double t0, t1;
-    int medium;
-};
-// The media along `ray` (starting in `medium`, leaving a surface with tMin) up to the first surface
-// that is not a null interface. At most `kMaxRaySegments`.
-inline constexpr int kMaxRaySegments = 16;
-int straightSegments(const Scene& scene, const Ray& ray, int medium, double tMin, std::array<RaySegment, kMaxRaySegments>& out);
 
 struct CorePoint {
     Vec3 y;
@@ -37,11 +29,11 @@ struct CorePoint {
     double weight;  // source per unit length / pdf / points, before transmittances
 };
 inline constexpr int kPointsPerCore = 8;
-// Appends the core points of line `line` (all sides) along the segments, with weight
+// Appends the core points of line `line` (all sides) along the segments (traceStraightLine's), with weight
 // sourcePerChannel(medium, side) · channels(y) · E(y) / pdf / kPointsPerCore, E the line's irradiance
 // in W/m². `uPoints` shifts the stratified points. Returns the sum of the weights added.
 template <class SourcePerChannel>
-double addCorePoints(const Scene& scene, const BeamLine& beam, int line, const Ray& ray, const RaySegment* segments, int count,
+double addCorePoints(const Scene& scene, const BeamLine& beam, int line, const Ray& ray, const std::vector<RaySegment>& segments,
                      double uPoints, SourcePerChannel&& sourcePerChannel, std::vector<CorePoint>& out);
 
 }  // namespace fluorosim

@@ -7,15 +7,16 @@
 namespace fluorosim {
 
 template <class SourcePerChannel>
-double addCorePoints(const Scene& scene, const BeamLine& beam, int line, const Ray& ray, const RaySegment* segments, int count,
+double addCorePoints(const Scene& scene, const BeamLine& beam, int line, const Ray& ray, const std::vector<RaySegment>& segments,
                      double uPoints, SourcePerChannel&& sourcePerChannel, std::vector<CorePoint>& out) {
     constexpr double kMm2PerM2 = 1e6;  // irradiance W/mm² -> W/m², as the light sampler converts it
     double total = 0;
     ChannelValues ch;
     for (int side = 0; side < beam.profile->sides(); ++side) {
         const BeamCore core = beam.profile->coreAlong(ray, side, beam.lambdaNm);
-        for (int si = 0; si < count && core.count > 0; ++si) {
+        for (size_t si = 0; si < segments.size() && core.count > 0; ++si) {
             const RaySegment& seg = segments[si];
+            if (seg.medium == kNone || scene.media[static_cast<size_t>(seg.medium)].isVacuumLike()) continue;
             const Medium& med = scene.media[static_cast<size_t>(seg.medium)];
             const std::array<double, kMaxMediumChannels> perChannel = sourcePerChannel(seg.medium, side);
             bool any = false;
@@ -24,7 +25,8 @@ double addCorePoints(const Scene& scene, const BeamLine& beam, int line, const R
             for (int k = 0; k < core.count; ++k) {
                 const BeamCoreInterval& iv = core.intervals[static_cast<size_t>(k)];
                 const double lo = std::max(iv.tMin, seg.t0), hi = std::min(iv.tMax, seg.t1);
-                if (!(hi > lo) || !std::isfinite(hi - lo)) continue;
+                // An unbounded piece needs the normal proposal; uniform over it is impossible.
+                if (!(hi > lo) || (!std::isfinite(hi - lo) && !std::isfinite(iv.sigma))) continue;
                 for (int n = 0; n < kPointsPerCore; ++n) {
                     double pdf = 0;
                     const double t = sampleTruncatedNormal((n + uPoints) / kPointsPerCore, iv.centre, iv.sigma, lo, hi, &pdf);

@@ -8,6 +8,8 @@
 #include "core/math.h"
 #include "core/sampling.h"
 #include "media/free_flight.h"
+#include "render/beam_core.h"
+#include "render/straight_line.h"
 
 namespace fluorosim {
 namespace {
@@ -23,21 +25,28 @@ SampledSpectrum clampZero(const SampledSpectrum& s) {
     return r;
 }
 
-// Whether the direct estimator (render/direct_beam.h) covers this light sample at p: a beam at one of
-// its spectral lines (not a continuous beam spectrum), connected from inside the beam's core.
-bool coveredByDirectPart(const LightSample& ls, const Vec3& p, const SampledWavelengths& wl) {
-    return ls.beam && wl.discrete && ls.beamProfile->inCore(p, ls.side, wl.lambda[0]);
+// Whether the camera's imaging computes this light sample's contribution at p itself: a beam at one of
+// its spectral lines (not a continuous beam spectrum), connected from inside the beam's core, where the
+// imaging computes the unscattered image (CameraPathImaging).
+bool computedByImaging(const LightSample& ls, const Vec3& p, const SampledWavelengths& wl, const CameraPathImaging* imaging) {
+    return imaging && ls.beam && wl.discrete && ls.beamProfile->inCore(p, ls.side, wl.lambda[0]) && imaging->computesUnscatteredAt(p);
 }
 
 }  // namespace
 
+namespace {
+bool anyBeam(const std::vector<Light>& lights) {
+    return std::any_of(lights.begin(), lights.end(), [](const Light& l) { return std::holds_alternative<BeamLight>(l); });
+}
+}  // namespace
+
 PathTracer::PathTracer(const Scene& scene)
     : scene_(scene), lightList_(scene.lights), lights_(scene, lightList_),
-      fluorescence_(scene, lightList_) {}
+      fluorescence_(scene, lightList_), hasBeams_(anyBeam(lightList_)) {}
 
 PathTracer::PathTracer(const Scene& scene, std::vector<Light> lights)
     : scene_(scene), lightList_(std::move(lights)), lights_(scene, lightList_),
-      fluorescence_(scene, lightList_) {
+      fluorescence_(scene, lightList_), hasBeams_(anyBeam(lightList_)) {
     const auto isArea = [](const Light& l) { return std::holds_alternative<AreaLight>(l); };
     if (std::any_of(scene.lights.begin(), scene.lights.end(), isArea) || std::any_of(lightList_.begin(), lightList_.end(), isArea))
         throw ConfigError("a separate light list cannot be used with emitting shapes (their lights are indexed by shape)");
@@ -177,10 +186,17 @@ struct PathTracer::PathState {
     Vec3 prevScatter;
     int generation = 0;             // fluorescence events before this path
     bool startsAtEmission = false;  // ray.o is a re-emission point with an isotropic direction still to choose
-    // Beam cores estimated separately (PathStart::directBeamsSeparate): on a camera path's first
-    // straight segment, and at the first vertex of a sub-path branched from it.
-    bool directCameraSegment = false;
-    bool skipBeamCoresAtStart = false;
+    // The camera's imaging (PathStart::imaging) weighs the first vertex of a camera path and computes
+    // the unscattered image of beam cores on its first straight segment, which sub-paths branched there
+    // leave out at their first vertex.
+    const CameraPathImaging* imaging = nullptr;
+    bool firstSegment = false;
+    const CameraPathImaging* skipComputedAtStart = nullptr;
+    // The sheet-side strategy ran at the last medium vertex (prevScatter): the phase pdf of the direction
+    // the path then took and the proposal's asymmetry there, for the MIS weight of a beam connection
+    // at the next vertex (sheetScattering).
+    bool sheetSampledAtLastVertex = false;
+    double lastPhasePdf = 0, lastProposalG = 0;
     double tMin = 0;                // > 0 when ray.o lies on the surface the ray leaves
 };
 
@@ -192,7 +208,8 @@ PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths&
     state.medium = medium;
     state.beta = start.beta;
     state.r_u = start.r_u;
-    state.directCameraSegment = start.directBeamsSeparate;
+    state.imaging = start.imaging;
+    state.firstSegment = true;
     state.prevScatter = ray.o;
     return trace(state, wl, rng, stats);
 }
@@ -203,7 +220,7 @@ PathRadiance PathTracer::meanRadiance(const Vec3& p, int medium, const SampledWa
 }
 
 PathRadiance PathTracer::traceFromEmission(const Vec3& p, int medium, const SampledWavelengths& wl, const SampledSpectrum& beta, int depth,
-                                           int generation, Rng& rng, PathStats& stats, bool skipBeamCores) const {
+                                           int generation, Rng& rng, PathStats& stats, const CameraPathImaging* skipComputed) const {
     PathState state;
     state.ray = Ray{p, Vec3(0, 0, 1)};
     state.medium = medium;
@@ -212,13 +229,13 @@ PathRadiance PathTracer::traceFromEmission(const Vec3& p, int medium, const Samp
     state.depth = depth;
     state.generation = generation;
     state.startsAtEmission = true;
-    state.skipBeamCoresAtStart = skipBeamCores;
+    state.skipComputedAtStart = skipComputed;
     return trace(state, wl, rng, stats);
 }
 
 SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double* channels, const SampledWavelengths& wl,
                                          const SampledSpectrum& weight, Rng& rng, PathStats& stats, int generation, int depth,
-                                         bool skipBeamCores) const {
+                                         const CameraPathImaging* skipComputed) const {
     // Generations are ended by roulette; this cap only guards the stack and is reported if reached.
     constexpr int kMaxGenerations = 64;
     if (generation >= kMaxGenerations) {
@@ -256,10 +273,10 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double
     if (fluorescence_.model() == FluorescenceModel::Paper) {
         const double uLight = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform();
         if (const auto ls = lights_.sample(p, uLight, u1, u2, wlx);
-            ls && ls->L && ls->pdf > 0 && !(skipBeamCores && coveredByDirectPart(*ls, p, wlx)))
+            ls && ls->L && ls->pdf > 0 && !computedByImaging(*ls, p, wlx, skipComputed))
             Lx = start * estimateTransmittance(p, ls->p, medium, wlx, rng, nullptr, 0.0, ls->beam, true).T * ls->L * (kInv4Pi / ls->pdf);
     } else {
-        Lx = traceFromEmission(p, medium, wlx, start, depth, generation + 1, rng, stats, skipBeamCores).total();
+        Lx = traceFromEmission(p, medium, wlx, start, depth, generation + 1, rng, stats, skipComputed).total();
     }
     SampledSpectrum result(0.0);
     for (int k = 0; k < kNumWavelengths; ++k) {
@@ -298,11 +315,12 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
     // NEE from a scattering vertex. evalScatter(wi) returns {f * |cos| (or phase value), pdf}.
     // At a surface, `surface` and `n` let the light ray leave through the side of wi (transmission).
     auto directLight = [&](const Vec3& p, int lightMedium, const SampledSpectrum& r_p, auto&& evalScatter,
-                           const Vec3& nOffset, const ShapeInfo* surface, double surfaceEps, bool skipBeamCores) -> SampledSpectrum {
+                           const Vec3& nOffset, const ShapeInfo* surface, double surfaceEps,
+                           const CameraPathImaging* skipComputed) -> SampledSpectrum {
         const double uLight = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform();
         const auto ls = lights_.sample(p, uLight, u1, u2, wl);
         if (!ls || !ls->L || !(ls->pdf > 0)) return SampledSpectrum(0.0);
-        if (skipBeamCores && coveredByDirectPart(*ls, p, wl)) return SampledSpectrum(0.0);
+        if (computedByImaging(*ls, p, wl, skipComputed)) return SampledSpectrum(0.0);
         const auto [fHat, scatterPdf] = evalScatter(ls->wi);
         if (!fHat) return SampledSpectrum(0.0);
         int startMedium = lightMedium;
@@ -311,14 +329,82 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             estimateTransmittance(p, ls->p, startMedium, wl, rng, surface ? &nOffset : nullptr, surfaceEps, ls->beam, ls->delta);
         if (!T.T) return SampledSpectrum(0.0);
         const SampledSpectrum rl = T.r_l * r_p * ls->pdf;
-        if (ls->delta) return beta * fHat * T.T * ls->L / rl.average();
+        if (ls->delta) {
+            // A medium vertex inside a beam's core reached by a phase-sampled direction from a vertex
+            // where the sheet-side strategy also ran: the balance heuristic over that direction.
+            double mis = 1;
+            if (!surface && ls->beam && wl.discrete && st.sheetSampledAtLastVertex && ls->beamProfile->inCore(p, ls->side, wl.lambda[0])) {
+                const Vec3 w = normalize(p - prevScatter);
+                const double pdfSheet = HenyeyGreenstein(st.lastProposalG).pdf(ls->beamProfile->direction(ls->side), -w);
+                mis = st.lastPhasePdf / (st.lastPhasePdf + pdfSheet);
+            }
+            return beta * fHat * T.T * ls->L * mis / rl.average();
+        }
         const SampledSpectrum ru = T.r_u * r_p * scatterPdf;
         return beta * fHat * T.T * ls->L / (rl + ru).average();
     };
 
-    // A real scattering vertex in a medium: NEE with MIS, then a new direction from the phase function
-    // (sampled exactly, so f / pdf = 1 and beta is unchanged).
-    auto scatterInMedium = [&](const Vec3& p, const HenyeyGreenstein& phase, bool skipBeamCores) {
+    // Sheet-side sampling of the beam light that scattered once in a beam's core on its way to p, for
+    // paths at a beam's line: a direction from the Henyey–Greenstein lobe (asymmetry proposalG) around
+    // the beam's axis, and the core integrated along the line from p in that direction (core points,
+    // one transmittance pick). Combined with phase sampling by the balance heuristic over the
+    // direction: a phase-sampled path that next scatters inside the core weighs its beam connection
+    // by the complement (directLight). Without it that connection alone finds this light, with the
+    // core's irradiance as weight and the core's thinness as probability: fireflies.
+    auto sheetScattering = [&](const Vec3& p, double proposalG, auto&& phasePdf) -> SampledSpectrum {
+        const size_t count = lightList_.size();
+        const double uLight = rng.uniform(), uSide = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform(), uPoints = rng.uniform(),
+                     uPick = rng.uniform();
+        const size_t index = std::min(count - 1, static_cast<size_t>(uLight * static_cast<double>(count)));
+        const BeamLight* beam = std::get_if<BeamLight>(&lightList_[index]);
+        if (!beam) return SampledSpectrum(0.0);
+        const BeamProfile& profile = *beam->profile;
+        const int side = std::min(profile.sides() - 1, static_cast<int>(uSide * profile.sides()));
+        const double power = profile.spectrum().sampleEmission(wl)[0];
+        if (!(power > 0)) return SampledSpectrum(0.0);
+        const Vec3 axis = profile.direction(side);
+        const HenyeyGreenstein proposal(proposalG);
+        double pdfSheet = 0;
+        const Vec3 travel = proposal.sample(axis, u1, u2, &pdfSheet);  // the scattered light's direction, toward p
+        const Vec3 w = -travel;
+        const double f = phasePdf(w);
+        if (!(f > 0) || !(pdfSheet > 0)) return SampledSpectrum(0.0);
+        const Ray line{p, w};
+        const StraightLine straight = traceStraightLine(scene_, line, medium, 0.0, std::numeric_limits<double>::infinity(), LineSurfaces::StopAtAny);
+        const double lambda = wl.lambda[0];
+        std::vector<CorePoint> points;
+        const double total = addCorePoints(scene_, BeamLine{&profile, lambda, power}, 0, line, straight.segments, uPoints,
+                                           [&](int m, int s) {
+                                               std::array<double, kMaxMediumChannels> perChannel{};
+                                               if (s == side) {
+                                                   const Medium& med = scene_.media[static_cast<size_t>(m)];
+                                                   perChannel[kScatteringChannel] = med.scatteringAt(lambda) * med.phase().pdf(axis, travel);
+                                               }
+                                               return perChannel;
+                                           },
+                                           points);
+        if (!(total > 0)) return SampledSpectrum(0.0);
+        // One point, picked in proportion to its weight, carries the transmittances for all.
+        double target = uPick * total, acc = 0;
+        size_t pick = 0;
+        for (; pick + 1 < points.size(); ++pick) {
+            acc += points[pick].weight;
+            if (acc > target) break;
+        }
+        const CorePoint& z = points[pick];
+        const SampledSpectrum T = transmittance(p, z.y, medium, wl, rng);
+        if (!T) return SampledSpectrum(0.0);
+        const SampledSpectrum Tb = beamTransmittance(z.y, -axis, z.medium, wl, rng);
+        const double select = 1.0 / (static_cast<double>(count) * profile.sides());
+        const double mis = pdfSheet / (f + pdfSheet);
+        return beta * T * Tb * (total * f * mis / (pdfSheet * select)) / r_u.average();
+    };
+    auto sheetLinesAt = [&](const SampledWavelengths& w) { return w.discrete && hasBeams_; };
+
+    // A real scattering vertex in a medium: NEE with MIS, the sheet-side strategy, then a new direction
+    // from the phase function (sampled exactly, so f / pdf = 1 and beta is unchanged). `proposalG` is the
+    // medium's asymmetry (the sheet-side proposal's), which an emission vertex's isotropic phase is not.
+    auto scatterInMedium = [&](const Vec3& p, const HenyeyGreenstein& phase, double proposalG, const CameraPathImaging* skipComputed) {
         const Vec3 dirIn = ray.d;
         L += directLight(
             p, medium, r_u,
@@ -326,18 +412,24 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                 const double v = phase.pdf(dirIn, wi);
                 return std::pair{SampledSpectrum(v), v};
             },
-            Vec3(), nullptr, 0.0, skipBeamCores);
+            Vec3(), nullptr, 0.0, skipComputed);
+        const bool sheets = sheetLinesAt(wl);
+        if (sheets) L += sheetScattering(p, proposalG, [&](const Vec3& wi) { return phase.pdf(dirIn, wi); });
         double phasePdf = 0;
         const Vec3 wi = phase.sample(dirIn, rng.uniform(), rng.uniform(), &phasePdf);
         r_l = r_u / phasePdf;
         prevScatter = p;
         lightSampledAtLastVertex = true;
+        st.sheetSampledAtLastVertex = sheets;
+        st.lastPhasePdf = phasePdf;
+        st.lastProposalG = proposalG;
         ray = Ray{p, wi};
     };
 
     if (st.startsAtEmission) {
         static const HenyeyGreenstein isotropic(0.0);
-        scatterInMedium(ray.o, isotropic, st.skipBeamCoresAtStart);
+        const double g = medium != kNone ? scene_.media[static_cast<size_t>(medium)].phase().g() : 0.0;
+        scatterInMedium(ray.o, isotropic, g, st.skipComputedAtStart);
     }
 
     while (true) {
@@ -392,9 +484,14 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                         if (rng.uniform() * sigmaBBar[0] < sigmaB[0]) {
                             const double pdf = Tm[0] * sigmaB[0];
                             const SampledSpectrum r_e = r_u * sigmaB * Tm / pdf;
-                            if (r_e)
-                                Lf += fluorescence(ray.at(t), medium, ch.data(), wl, beta * Tm / (pdf * r_e.average()), rng, stats,
-                                                   st.generation, depth, st.directCameraSegment);
+                            if (r_e) {
+                                const Vec3 y = ray.at(t);
+                                // On the first segment the branch point is the vertex the camera images.
+                                const CameraPathImaging* imaging = st.firstSegment ? st.imaging : nullptr;
+                                SampledSpectrum w = beta * Tm / (pdf * r_e.average());
+                                if (imaging) w *= imaging->firstVertexWeight(y, wl);
+                                Lf += fluorescence(y, medium, ch.data(), wl, w, rng, stats, st.generation, depth, imaging);
+                            }
                         }
                         const SampledSpectrum ratio = Tm * sigmaBBar / (Tm[0] * sigmaBBar[0]);
                         beta *= ratio;
@@ -423,10 +520,11 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                             terminated = true;
                             return false;
                         }
-                        const bool skipCores = st.directCameraSegment;
-                        st.directCameraSegment = false;
+                        const Vec3 y = ray.at(t);
+                        if (st.firstSegment && st.imaging) beta *= st.imaging->firstVertexWeight(y, wl);
+                        st.firstSegment = false;
                         if (beta && r_u) {
-                            scatterInMedium(ray.at(t), med.phase(), skipCores);
+                            scatterInMedium(y, med.phase(), med.phase().g(), nullptr);
                             scattered = true;
                         }
                         return false;
@@ -453,9 +551,18 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
 
         if (!hit) break;  // no environment light
         const ShapeInfo& shape = scene_.shapes[hit->shape];
+        // A surface with a material is the first vertex of a camera path that has met nothing before it;
+        // an emitter without one images only its own emission there.
+        SampledSpectrum imagingWeight(1.0);
+        if (st.firstSegment && st.imaging && (shape.material != kNone || shape.areaLight != kNone))
+            imagingWeight = st.imaging->firstVertexWeight(hit->p, wl);
+        if (shape.material != kNone) {
+            beta *= imagingWeight;
+            imagingWeight = SampledSpectrum(1.0);
+        }
         if (shape.areaLight != kNone) {
             const auto& light = std::get<AreaLight>(scene_.lights[static_cast<size_t>(shape.areaLight)]);
-            const SampledSpectrum Le = lights_.emitted(light, hit->n, -ray.d, wl);
+            const SampledSpectrum Le = lights_.emitted(light, hit->n, -ray.d, wl) * imagingWeight;
             if (Le) {
                 if (!lightSampledAtLastVertex) L += beta * Le / r_u.average();
                 else {
@@ -476,7 +583,8 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             break;
         }
         ++stats.surfaceBounces;
-        st.directCameraSegment = false;
+        st.firstSegment = false;
+        st.sheetSampledAtLastVertex = false;
         const Material& mat = *scene_.materials[static_cast<size_t>(shape.material)];
         // Opaque surfaces are two-sided; interfaces keep their outward orientation.
         const Vec3 n = shape.isInterface ? hit->n : faceForward(hit->n, -ray.d);
@@ -493,7 +601,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                     const SampledSpectrum f = mat.f(wo, wiLocal, wl, eta, TransportMode::Radiance) * std::abs(wiLocal.z);
                     return std::pair{f, mat.pdf(wo, wiLocal, eta)};
                 },
-                n, &shape, hit->epsilon, false);
+                n, &shape, hit->epsilon, nullptr);
         }
 
         const auto bs = mat.sample(wo, rng.uniform(), rng.uniform(), rng.uniform(), wl, eta, TransportMode::Radiance);

@@ -45,15 +45,28 @@ struct PathRadiance {
     SampledSpectrum total() const { return elastic + fluorescent; }
 };
 
+// What a caller that images camera paths (the microscope) puts around one path: a weight at the path's
+// first vertex, where the light the path carries leaves toward the camera (a diffraction PSF in place of
+// the geometric image of that point), and the part of the transport the caller computes itself, which
+// the path then leaves out so that the two add up to the model (docs/model.md, "The computed image").
+class CameraPathImaging {
+public:
+    virtual ~CameraPathImaging() = default;
+    // Factor on the throughput at the first vertex y (a scattering or fluorescence branch point, or a
+    // surface) at the path's wavelengths; it multiplies f, not the pdfs.
+    virtual SampledSpectrum firstVertexWeight(const Vec3& y, const SampledWavelengths& wl) const = 0;
+    // Whether the caller computes the fluorescence that a beam's unscattered light (at a spectral line,
+    // inside the beam's core) excites at y, a point of the camera path's first straight segment.
+    virtual bool computesUnscatteredAt(const Vec3& y) const = 0;
+};
+
 // What sampling before a camera path gave each wavelength: a caller that draws part of the path itself
 // (a PSF displacement at the hero wavelength) passes the throughput f_j/p_0 and the pdf ratios p_j/p_0
 // of that part, so that the tracer's spectral MIS weighs the whole path (pbrt-v4 passes beta and r_u
 // into Li). A product of two separately normalized one-sample MIS weights would be biased.
 struct PathStart {
     SampledSpectrum beta{1.0}, r_u{1.0};
-    // The unscattered light of the beams' cores along the camera ray's first straight segment is
-    // estimated separately (render/direct_beam.h): leave it out here, so the two add up to the model.
-    bool directBeamsSeparate = false;
+    const CameraPathImaging* imaging = nullptr;  // none: a plain camera path
 };
 
 class PathTracer {
@@ -100,20 +113,21 @@ private:
                     bool residual) const;
     PathRadiance trace(PathState& state, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;
     // A path that starts at p in an isotropic direction (a re-emission point) with throughput beta.
-    // With `skipBeamCores`, its first vertex leaves out beams whose core holds p (PathStart).
+    // With `skipComputed`, its first vertex leaves out what the camera's imaging computes at p.
     PathRadiance traceFromEmission(const Vec3& p, int medium, const SampledWavelengths& wl, const SampledSpectrum& beta, int depth,
-                                   int generation, Rng& rng, PathStats& stats, bool skipBeamCores = false) const;
+                                   int generation, Rng& rng, PathStats& stats, const CameraPathImaging* skipComputed = nullptr) const;
     // Radiance re-emitted at p towards the path, at the camera wavelengths, for a branch whose
     // source-term estimate is multiplied by `weight` (throughput over branch pdf, MIS-normalized).
     SampledSpectrum fluorescence(const Vec3& p, int medium, const double* channels, const SampledWavelengths& wl,
                                  const SampledSpectrum& weight, Rng& rng, PathStats& stats, int generation, int depth,
-                                 bool skipBeamCores) const;
+                                 const CameraPathImaging* skipComputed) const;
     int mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const Vec3& dir, int current) const;
 
     const Scene& scene_;
     std::vector<Light> lightList_;
     LightSampler lights_;
     FluorescencePlan fluorescence_;
+    bool hasBeams_ = false;  // some light is a beam: the sheet-side strategy runs at its lines
 };
 
 }  // namespace fluorosim

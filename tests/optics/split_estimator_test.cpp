@@ -92,11 +92,11 @@ void expectSameImage(double sigmaS, int pathSpp, int splitSpp) {
     const Scene scene = filamentScene(sigmaS);
     const optics::PlaneImage path = render(scene, optics::Estimator::Path, pathSpp, 11);
     const optics::PlaneImage split = render(scene, optics::Estimator::Split, splitSpp, 12);
-    std::printf("  sigma_s %.0f/mm: path %.1f s, split %.1f s (direct part %.3g of %.3g e-)\n", sigmaS, path.seconds, split.seconds,
-                split.directElectrons, split.directElectrons + split.pathElectrons);
-    EXPECT_GT(split.directElectrons, 0.0);
+    std::printf("  sigma_s %.0f/mm: path %.1f s, split %.1f s (computed part %.3g of %.3g e-)\n", sigmaS, path.seconds, split.seconds,
+                split.computedElectrons, split.computedElectrons + split.pathElectrons);
+    EXPECT_GT(split.computedElectrons, 0.0);
     if (sigmaS > 0) {
-        EXPECT_GT(split.pathElectrons, 0.01 * split.directElectrons);  // both parts carry signal
+        EXPECT_GT(split.pathElectrons, 0.01 * split.computedElectrons);  // both parts carry signal
     }
     // The whole image and its four quadrants.
     const int h = kSize / 2;
