@@ -43,6 +43,7 @@ void AcquireOptions::validate() const {
     if (noiseRatio && (maxSpp < spp || pilotSpp < 2))
         throw ConfigError("adaptive sampling needs max spp >= spp and at least 2 pilot samples, got max " + std::to_string(maxSpp) + ", spp " +
                           std::to_string(spp) + ", pilot " + std::to_string(pilotSpp));
+    if (!(poolingFraction >= 0 && poolingFraction <= 1)) throw ConfigError("pooling fraction must lie in [0, 1], got " + std::to_string(poolingFraction));
     unscattered.validate();
     psf.validate();
 }
@@ -51,21 +52,38 @@ uint64_t planeStreamKey(const std::string& channelName, int plane) { return mixB
 
 namespace {
 
-// What the microscope puts around one camera path: the PSF weight at its first vertex, and the
-// computed part the path leaves out.
+// What the microscope puts around one camera path: the PSF weight at its first vertex, the computed
+// part the path leaves out, and that part's emission for the path to connect to after scattering.
 class PathImaging final : public CameraPathImaging {
 public:
-    PathImaging(const Imaging& imaging, const UnscatteredModel* computed, const Vec3& pixelPoint)
-        : imaging_(imaging), computed_(computed), pixelPoint_(pixelPoint) {}
+    PathImaging(const Imaging& imaging, const UnscatteredModel* computed, const EmissionPoints* emission, const Vec3& pixelPoint,
+                double poolingFraction)
+        : imaging_(imaging), computed_(computed), emission_(emission && !emission->empty() ? emission : nullptr), pixelPoint_(pixelPoint),
+          poolingFraction_(poolingFraction) {}
     SampledSpectrum firstVertexWeight(const Vec3& y, const SampledWavelengths& wl) const override {
         return imaging_.firstVertexWeight(pixelPoint_, y, wl);
     }
     bool computesUnscatteredAt(const Vec3& y) const override { return computed_ && computed_->covers(imaging_, y); }
+    std::optional<EmissionPoint> sampleEmissionPoint(double uCell, double ux, double uy, double uz) const override {
+        if (!emission_) return std::nullopt;
+        const EmissionPoints::Sample s = emission_->sample(uCell, ux, uy, uz);
+        return EmissionPoint{s.p, s.pdf};
+    }
+    double emissionPointPdf(const Vec3& p) const override { return emission_ ? emission_->pdf(p) : 0.0; }
+    // Blocks of 2^k pixels with 2^k <= fraction × the radius (in pixels) of y's geometric defocus disc.
+    int imageLevel(const Vec3& y) const override {
+        if (!(poolingFraction_ > 0)) return 0;
+        const double disc = std::abs(imaging_.local(y).dz) * imaging_.tanThetaMax() / imaging_.pixelMm();
+        const double block = poolingFraction_ * disc;
+        return block >= 2 ? std::min(kImageLevels - 1, static_cast<int>(std::floor(std::log2(block)))) : 0;
+    }
 
 private:
     const Imaging& imaging_;
     const UnscatteredModel* computed_;
+    const EmissionPoints* emission_;
     Vec3 pixelPoint_;
+    double poolingFraction_;
 };
 
 // Pilot paths of adaptive sampling draw from sample indices the estimate never reaches.
@@ -82,6 +100,65 @@ struct PixelTally {
     double mean() const { return n ? sum / n : 0.0; }
     double varianceOfMean() const { return n > 1 ? std::max(0.0, sum2 / n - sqr(sum / n)) / (n - 1) : 0.0; }
 };
+
+// Adds the pooled parts to an image: per level k, the rows' sums of pixel means by block column become
+// block means (summed in row order, whatever the thread count), interpolated bilinearly between block
+// centres to every pixel, with their variances by the same weights squared.
+template <class Rows, class SumOf, class VarianceOf>
+void addPooledParts(const Rows& rows, int width, int height, PlaneImage& r, SumOf sumOf, VarianceOf varianceOf) {
+    std::vector<double> variance(r.electrons.size());
+    for (size_t i = 0; i < variance.size(); ++i) variance[i] = sqr(r.stderrElectrons[i]);
+    for (int k = 1; k < kImageLevels; ++k) {
+        const int block = 1 << k, bx = ((width - 1) >> k) + 1, by = ((height - 1) >> k) + 1;
+        std::vector<double> mean(static_cast<size_t>(bx) * by, 0.0), var(mean.size(), 0.0);
+        bool any = false;
+        for (int y = 0; y < height; ++y) {
+            const std::vector<double>& sum = sumOf(rows[static_cast<size_t>(y)], k);
+            if (sum.empty()) continue;
+            any = true;
+            const std::vector<double>& v = varianceOf(rows[static_cast<size_t>(y)], k);
+            for (int c = 0; c < bx; ++c) {
+                mean[static_cast<size_t>((y >> k) * bx + c)] += sum[static_cast<size_t>(c)];
+                var[static_cast<size_t>((y >> k) * bx + c)] += v[static_cast<size_t>(c)];
+            }
+        }
+        if (!any) continue;
+        for (int cy = 0; cy < by; ++cy)
+            for (int cx = 0; cx < bx; ++cx) {
+                const double pixels = double(std::min(block, width - cx * block)) * std::min(block, height - cy * block);
+                mean[static_cast<size_t>(cy * bx + cx)] /= pixels;
+                var[static_cast<size_t>(cy * bx + cx)] /= pixels * pixels;
+            }
+        auto axis = [&](int p, int blocks, int* c0, int* c1, double* f) {
+            const double u = (p + 0.5) / block - 0.5;
+            *c0 = std::clamp(static_cast<int>(std::floor(u)), 0, blocks - 1);
+            *c1 = std::min(*c0 + 1, blocks - 1);
+            *f = std::clamp(u - *c0, 0.0, 1.0);
+        };
+        for (int y = 0; y < height; ++y) {
+            int y0, y1, x0, x1;
+            double fy, fx;
+            axis(y, by, &y0, &y1, &fy);
+            for (int x = 0; x < width; ++x) {
+                axis(x, bx, &x0, &x1, &fx);
+                const std::array<std::pair<size_t, double>, 4> w{{{static_cast<size_t>(y0 * bx + x0), (1 - fx) * (1 - fy)},
+                                                                  {static_cast<size_t>(y0 * bx + x1), fx * (1 - fy)},
+                                                                  {static_cast<size_t>(y1 * bx + x0), (1 - fx) * fy},
+                                                                  {static_cast<size_t>(y1 * bx + x1), fx * fy}}};
+                double m = 0, v = 0;
+                for (const auto& [i, wi] : w) {
+                    m += wi * mean[i];
+                    v += wi * wi * var[i];
+                }
+                const size_t pixel = static_cast<size_t>(y) * width + x;
+                r.electrons[pixel] += m;
+                variance[pixel] += v;
+                r.pathElectrons += m;
+            }
+        }
+    }
+    for (size_t i = 0; i < variance.size(); ++i) r.stderrElectrons[i] = std::sqrt(variance[i]);
+}
 
 PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const ObjectiveOptions& objective, const FocalPlane& focus,
                       const Filter& emission, const DetectorOptions& detector, int width, int height, uint64_t streamKey,
@@ -100,6 +177,7 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
     r.electrons.assign(static_cast<size_t>(width) * height, 0.0);
     r.stderrElectrons.assign(r.electrons.size(), 0.0);
     std::vector<double> computed(r.electrons.size(), 0.0);
+    std::shared_ptr<const EmissionPoints> emissionPoints;
     if (model) {
         const UnscatteredPlane u = computeUnscatteredImage(scene, tracer.lights(), imaging, *model, o.threads, o.cancel);
         if (!u.complete) {
@@ -107,17 +185,21 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
             return r;
         }
         computed = u.electrons;
+        emissionPoints = u.emission;
         r.computedPoints = u.points;
         r.computedSeconds = u.seconds;
     }
     // Each row's totals, kept apart so that threads never share them; summed into the image at the end.
     struct RowTotals {
         PathStats stats;
-        double largest = 0, largestOverPixel = 0, computed = 0, path = 0, pathSeconds = 0;
+        double largest = 0, computed = 0, path = 0, pathSeconds = 0;
         uint64_t samples = 0, pilots = 0, nonFinite = 0;
         bool done = false;
+        // Pooled parts: per level, this row's sums of its pixels' means (and their variances) by block column.
+        std::array<std::vector<double>, kImageLevels> pooledSum, pooledVariance;
     };
     std::vector<RowTotals> rows(static_cast<size_t>(height));
+    std::vector<double> largestInPixel(r.electrons.size(), 0.0);  // largest per-pixel path sample
     // Dark electrons of the exposure: part of the camera noise an adaptive target is relative to.
     const double darkElectrons = detector.darkCurrentElectronsPerS * detector.exposureS;
     int rowsDone = 0;
@@ -129,8 +211,13 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         for (int x = 0; x < width; ++x) {
             const size_t pixel = yRow * static_cast<size_t>(width) + static_cast<size_t>(x);
             PixelTally paths;
-            double largest = 0;
+            double largest = 0, largestOwn = 0;
             const auto t0 = std::chrono::steady_clock::now();
+            // A sample's electrons, and the parts of them pooled at each level.
+            struct Sample {
+                double total = 0;
+                std::array<double, kImageLevels> pooled{};
+            };
             auto pathSample = [&](uint64_t s) {
                 Rng rng = Rng::forKey(o.seed, streamKey + pixel, s);
                 const SampledWavelengths wl = wavelengths.sample(rng.uniform(), rng.uniform());
@@ -146,26 +233,34 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                     for (int j = 1; j < kNumWavelengths; ++j) pathStart.r_u[j] = psf.displacementDensity(radius, wl.lambda[j]) / hero;
                     pathStart.beta = pathStart.r_u;
                 }
-                const PathImaging pathImaging(imaging, model, point);
+                const PathImaging pathImaging(imaging, model, emissionPoints.get(), point, o.poolingFraction);
                 pathStart.imaging = &pathImaging;
                 double cosT = 0;
                 const Ray ray = imaging.cameraRay(focal, rng.uniform(), rng.uniform(), &cosT);
-                const SampledSpectrum L = tracer.radiance(ray, scene.camera.medium, wl, rng, row.stats, pathStart).total();
-                double e = 0;
-                for (int j = 0; j < kNumWavelengths; ++j)
-                    if (L[j] != 0 && wl.pdf[j] != 0) e += L[j] / wl.pdf[j] * detection(wl.lambda[j]);
-                e *= cosT * imaging.sampleEtendue() / kNumWavelengths;
-                if (!std::isfinite(e)) {
+                const PathRadiance radiance = tracer.radiance(ray, scene.camera.medium, wl, rng, row.stats, pathStart);
+                auto electrons = [&](const SampledSpectrum& L) {
+                    double e = 0;
+                    for (int j = 0; j < kNumWavelengths; ++j)
+                        if (L[j] != 0 && wl.pdf[j] != 0) e += L[j] / wl.pdf[j] * detection(wl.lambda[j]);
+                    return e * cosT * imaging.sampleEtendue() / kNumWavelengths;
+                };
+                Sample out;
+                out.total = electrons(radiance.total());
+                for (int k = 1; k < kImageLevels; ++k)
+                    if (radiance.pooled[static_cast<size_t>(k)]) out.pooled[static_cast<size_t>(k)] = electrons(radiance.pooled[static_cast<size_t>(k)]);
+                bool finite = std::isfinite(out.total);
+                for (double e : out.pooled) finite = finite && std::isfinite(e);
+                if (!finite) {
                     ++row.nonFinite;
-                    return 0.0;
+                    return Sample{};
                 }
-                return e;
+                return out;
             };
             int n = o.spp;
             if (o.noiseRatio) {
                 // Pilot paths from streams the estimate never uses decide how many to trace.
                 PixelTally pilot;
-                for (int s = 0; s < o.pilotSpp; ++s) pilot.add(pathSample(kPilotSample + static_cast<uint64_t>(s)));
+                for (int s = 0; s < o.pilotSpp; ++s) pilot.add(pathSample(kPilotSample + static_cast<uint64_t>(s)).total);
                 const double signal = std::max(0.0, pilot.mean() + computed[pixel]);
                 const double target = sqr(*o.noiseRatio) * (signal + darkElectrons + sqr(detector.readNoiseElectrons));
                 const double perPath = pilot.varianceOfMean() * pilot.n;
@@ -173,17 +268,37 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                 n = static_cast<int>(std::clamp(wanted, double(o.spp), double(o.maxSpp)));
                 row.pilots += static_cast<uint64_t>(o.pilotSpp);
             }
+            std::array<PixelTally, kImageLevels> pooled;
             for (int s = 0; s < n; ++s) {
-                const double e = pathSample(static_cast<uint64_t>(s));
-                paths.add(e);
-                largest = std::max(largest, e);
+                const Sample e = pathSample(static_cast<uint64_t>(s));
+                double own = e.total;  // the part imaged per pixel
+                for (int k = 1; k < kImageLevels; ++k) {
+                    own -= e.pooled[static_cast<size_t>(k)];
+                    pooled[static_cast<size_t>(k)].add(e.pooled[static_cast<size_t>(k)]);
+                    largest = std::max(largest, e.pooled[static_cast<size_t>(k)] / double(1 << (2 * k)));
+                }
+                paths.add(own);
+                largest = std::max(largest, own);
+                largestOwn = std::max(largestOwn, own);
+            }
+            for (int k = 1; k < kImageLevels; ++k) {
+                const PixelTally& t = pooled[static_cast<size_t>(k)];
+                if (t.sum == 0 && t.sum2 == 0) continue;
+                std::vector<double>& sum = row.pooledSum[static_cast<size_t>(k)];
+                std::vector<double>& var = row.pooledVariance[static_cast<size_t>(k)];
+                if (sum.empty()) {
+                    sum.assign(static_cast<size_t>(((width - 1) >> k) + 1), 0.0);
+                    var.assign(sum.size(), 0.0);
+                }
+                sum[static_cast<size_t>(x >> k)] += t.mean();
+                var[static_cast<size_t>(x >> k)] += t.varianceOfMean();
             }
             row.samples += static_cast<uint64_t>(n);
             row.pathSeconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
             r.electrons[pixel] = paths.mean() + computed[pixel];
             r.stderrElectrons[pixel] = std::sqrt(paths.varianceOfMean());
             row.largest = std::max(row.largest, largest);
-            if (r.electrons[pixel] > 0) row.largestOverPixel = std::max(row.largestOverPixel, largest / r.electrons[pixel]);
+            largestInPixel[pixel] = largestOwn;
             row.computed += computed[pixel];
             row.path += paths.mean();
         }
@@ -192,10 +307,16 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         ++rowsDone;
         if (o.progress) o.progress(double(rowsDone) / height);
     });
+    addPooledParts(rows, width, height, r, [](const RowTotals& row, int k) -> const std::vector<double>& { return row.pooledSum[static_cast<size_t>(k)]; },
+                   [](const RowTotals& row, int k) -> const std::vector<double>& { return row.pooledVariance[static_cast<size_t>(k)]; });
+    // Heavy tails: a pixel's largest path sample against its value, where the value is above the read
+    // noise² (below it a ratio says nothing about the camera).
+    for (size_t i = 0; i < r.electrons.size(); ++i)
+        if (r.electrons[i] > std::max(1.0, sqr(detector.readNoiseElectrons)))
+            r.largestSampleOverPixel = std::max(r.largestSampleOverPixel, largestInPixel[i] / r.electrons[i]);
     for (const RowTotals& row : rows) {
         r.stats.add(row.stats);
         r.largestSample = std::max(r.largestSample, row.largest);
-        r.largestSampleOverPixel = std::max(r.largestSampleOverPixel, row.largestOverPixel);
         r.complete = r.complete && row.done;
         r.computedElectrons += row.computed;
         r.pathElectrons += row.path;

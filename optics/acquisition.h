@@ -40,6 +40,9 @@ struct AcquireOptions {
     Estimator estimator = Estimator::Split;
     int spp = 16;                    // path samples per pixel
     UnscatteredOptions unscattered;  // the quadrature of the computed part (split)
+    // Light imaged through a first vertex far from focus (its image a disc of radius ρ pixels) is pooled
+    // over blocks of 2^k pixels with 2^k <= poolingFraction × ρ; 0 images everything per pixel.
+    double poolingFraction = 0.25;
     PsfTableOptions psf;             // the PSF's cut and table resolution
     // Adaptive sampling to a noise target: each pixel traces as many paths (spp at least, maxSpp at
     // most) as bring its Monte Carlo standard error to `noiseRatio` times the camera's noise of its

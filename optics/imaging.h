@@ -10,6 +10,7 @@
 //  - Camera paths: a point uniform in the pixel, displaced by the in-focus PSF at the hero wavelength,
 //    a direction uniform over the cone; at the path's first vertex y the weight h/h_geo
 //    (WidefieldPsf::reweight) turns the geometric image of y into the PSF's (firstVertexWeight).
+#include <cmath>
 #include <memory>
 
 #include "optics/microscope.h"
@@ -48,6 +49,7 @@ public:
     // A direction of the cone from its polar cosine and azimuth (toward the objective).
     Vec3 coneDirection(double cosTheta, double phi) const;
     double cosMax() const { return cosMax_; }
+    double tanThetaMax() const { return std::sqrt(1 - cosMax_ * cosMax_) / cosMax_; }
     double coneSolidAngle() const;
     double workingDistanceMm() const { return workingDistanceMm_; }
     // Object pixel area (m²) × cone solid angle × exposure: what the mean radiance of a pixel's samples,

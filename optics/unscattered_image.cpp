@@ -415,6 +415,48 @@ bool UnscatteredModel::covers(const Imaging& plane, const Vec3& y) const {
 }
 
 // ------------------------------------------------------------------------------------------------
+// The emission as a proposal.
+
+EmissionPoints::EmissionPoints(const Imaging& plane, double x0, double yTop, double z0, double lateralMm, double axialMm)
+    : right_(plane.world(1, 0, 0) - plane.world(0, 0, 0)), up_(plane.world(0, 1, 0) - plane.world(0, 0, 0)),
+      axis_(plane.axis()), centre_(plane.centre()), x0_(x0), yTop_(yTop), z0_(z0), lateral_(lateralMm), axial_(axialMm) {}
+
+uint64_t EmissionPoints::key(int64_t i, int64_t j, int64_t l) const { return packKey(i, j, l); }
+
+void EmissionPoints::add(int64_t i, int64_t j, int64_t layer, double power) {
+    if (power > 0) power_[key(i, j, layer)] += power;
+}
+
+void EmissionPoints::finish() {
+    cells_.clear();
+    for (const auto& [k, v] : power_) cells_.push_back(k);
+    std::sort(cells_.begin(), cells_.end());
+    cdf_.resize(cells_.size());
+    total_ = 0;
+    for (size_t n = 0; n < cells_.size(); ++n) cdf_[n] = total_ += power_.at(cells_[n]);
+}
+
+EmissionPoints::Sample EmissionPoints::sample(double uCell, double ux, double uy, double uz) const {
+    const size_t n = std::min(cells_.size() - 1, static_cast<size_t>(std::upper_bound(cdf_.begin(), cdf_.end(), uCell * total_) - cdf_.begin()));
+    const uint64_t k = cells_[n];
+    const int64_t i = static_cast<int64_t>(k >> 42) - (1 << 20), j = static_cast<int64_t>((k >> 21) & 0x1FFFFF) - (1 << 20),
+                  l = static_cast<int64_t>(k & 0x1FFFFF) - (1 << 20);
+    const double x = x0_ + (static_cast<double>(i) + ux) * lateral_, y = yTop_ - (static_cast<double>(j) + uy) * lateral_,
+                 z = z0_ + (static_cast<double>(l) + uz) * axial_;
+    return {centre_ + right_ * x + up_ * y + axis_ * z, power_.at(k) / total_ / (lateral_ * lateral_ * axial_)};
+}
+
+double EmissionPoints::pdf(const Vec3& p) const {
+    if (cells_.empty()) return 0.0;
+    const Vec3 d = p - centre_;
+    const int64_t i = static_cast<int64_t>(std::floor((dot(d, right_) - x0_) / lateral_));
+    const int64_t j = static_cast<int64_t>(std::floor((yTop_ - dot(d, up_)) / lateral_));
+    const int64_t l = static_cast<int64_t>(std::floor((dot(d, axis_) - z0_) / axial_));
+    const auto it = power_.find(key(i, j, l));
+    return it == power_.end() ? 0.0 : it->second / total_ / (lateral_ * lateral_ * axial_);
+}
+
+// ------------------------------------------------------------------------------------------------
 // One plane.
 
 namespace {
@@ -916,6 +958,7 @@ UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<L
     struct Splat {
         double u, v, layerPos, e;
         size_t term;
+        double power;  // what the point emits into the channel's band, before the camera's side (for EmissionPoints)
     };
     // At most one splat per dye of the sample's medium; unused slots keep e = 0 and are dropped.
     size_t termsPerMedium = 0;
@@ -924,7 +967,7 @@ UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<L
         for (const DyeTerm& t : m.terms) n += t.medium == static_cast<int>(med);
         termsPerMedium = std::max(termsPerMedium, n);
     }
-    std::vector<Splat> slots(samples.size() * termsPerMedium, Splat{0, 0, 0, 0, 0});
+    std::vector<Splat> slots(samples.size() * termsPerMedium, Splat{0, 0, 0, 0, 0, 0});
     const double cone = plane.coneSolidAngle();
     parallelFor(samples.size(), threads, [&](size_t n) {
         if (cancel && cancel->load()) return;
@@ -947,7 +990,7 @@ UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<L
         for (size_t ti = 0; ti < m.terms.size(); ++ti) {
             const DyeTerm& t = m.terms[ti];
             if (t.medium != s.medium) continue;
-            Splat& out = slots[slot++];
+            Splat& slotOut = slots[slot++];
             const double c = s.dyes[static_cast<size_t>(t.channel - kFirstDyeChannel)];
             if (!(c > 0)) continue;
             double absorbed = 0;  // Σ_l E T σa(λ_l; c) λ_l
@@ -955,7 +998,9 @@ UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<L
             double camera = 0;
             for (int j = 0; j < kCameraWavelengths; ++j) camera += t.cameraWeights[static_cast<size_t>(j)] * Tcam[j];
             const double e = m.exposureS * cone * s.volumeMm3 * 1e-6 * kInv4Pi * camera * t.quantumYield * t.detected * absorbed;
-            if (e > 0) out = {(s.x - xLeft) / m.pixelMm, (yTop - s.y) / m.pixelMm, (s.dz - zLow) / m.axialMm - 0.5, e, ti};
+            if (e > 0)
+                slotOut = {(s.x - xLeft) / m.pixelMm, (yTop - s.y) / m.pixelMm, (s.dz - zLow) / m.axialMm - 0.5, e, ti,
+                       s.volumeMm3 * t.quantumYield * t.detected * absorbed};
         }
     });
     if (cancel && cancel->load()) {
@@ -966,6 +1011,12 @@ UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<L
     for (const Splat& sp : slots)
         if (sp.e > 0) splats.push_back(sp);
     slots = {};
+    auto emission = std::make_shared<EmissionPoints>(plane, xLeft, yTop, zLow, latt, m.axialMm);
+    for (const Splat& sp : splats)
+        emission->add(static_cast<int64_t>(std::floor(sp.u * m.o.lateralSamples)), static_cast<int64_t>(std::floor(sp.v * m.o.lateralSamples)),
+                      static_cast<int64_t>(std::floor(sp.layerPos + 0.5)), sp.power);
+    emission->finish();
+    out.emission = std::move(emission);
     std::stable_sort(splats.begin(), splats.end(), [](const Splat& a, const Splat& b) { return std::floor(a.v) < std::floor(b.v); });
 
     // --- 5. Splats, by bands of output rows (each pixel sums its splats in one fixed order, whatever the

@@ -28,6 +28,7 @@
 #include <atomic>
 #include <functional>
 #include <memory>
+#include <unordered_map>
 #include <vector>
 
 #include "optics/imaging.h"
@@ -51,11 +52,40 @@ struct UnscatteredOptions {
     void validate() const;              // ConfigError naming the option and value
 };
 
+// The computed part's emission as a proposal for camera paths that connect to it after scattering
+// (scattered emission): the lattice cells of the plane drawn in proportion to the power they emit into
+// the channel, then a point uniform in the cell. Thread-safe once built.
+class EmissionPoints {
+public:
+    struct Sample {
+        Vec3 p;
+        double pdf = 0;  // per mm³
+    };
+    bool empty() const { return cdf_.empty(); }
+    Sample sample(double uCell, double ux, double uy, double uz) const;
+    double pdf(const Vec3& p) const;  // 0 outside the cells
+
+    // Built by computeUnscatteredImage: cells of the lattice (i, j, layer) with their power.
+    EmissionPoints(const Imaging& plane, double x0, double yTop, double z0, double lateralMm, double axialMm);
+    void add(int64_t i, int64_t j, int64_t layer, double power);
+    void finish();
+
+private:
+    uint64_t key(int64_t i, int64_t j, int64_t l) const;
+    Vec3 right_, up_, axis_, centre_;
+    double x0_, yTop_, z0_, lateral_, axial_;
+    std::unordered_map<uint64_t, double> power_;
+    std::vector<uint64_t> cells_;
+    std::vector<double> cdf_;
+    double total_ = 0;
+};
+
 struct UnscatteredPlane {
     std::vector<double> electrons;  // expected photoelectrons per pixel, row-major from the top
     uint64_t points = 0;            // emission points of the quadrature
     double seconds = 0;
     bool complete = true;           // false when cancelled
+    std::shared_ptr<const EmissionPoints> emission;
 };
 
 // What the computed image of one channel needs, reused for every plane: the emitting dyes as the channel

@@ -29,6 +29,7 @@ struct CorePoint {
     double weight;  // source per unit length / pdf / points, before transmittances
 };
 inline constexpr int kPointsPerCore = 8;
+inline constexpr double kUniformCoreShare = 0.25;  // of the points, uniform over the piece (addCorePoints)
 // Appends the core points of line `line` (all sides) along the segments (traceStraightLine's), with weight
 // sourcePerChannel(medium, side) · channels(y) · E(y) / pdf / kPointsPerCore, E the line's irradiance
 // in W/m². `uPoints` shifts the stratified points. Returns the sum of the weights added.

@@ -27,9 +27,16 @@ double addCorePoints(const Scene& scene, const BeamLine& beam, int line, const R
                 const double lo = std::max(iv.tMin, seg.t0), hi = std::min(iv.tMax, seg.t1);
                 // An unbounded piece needs the normal proposal; uniform over it is impossible.
                 if (!(hi > lo) || (!std::isfinite(hi - lo) && !std::isfinite(iv.sigma))) continue;
+                // A defensive mixture: the profile's normal across the beam, and uniform over the piece,
+                // which bounds the weights where the normal misjudges the profile (a line nearly
+                // parallel to a sheet, along which the beam widens).
+                const double uniformShare = std::isfinite(hi - lo) ? kUniformCoreShare : 0.0;
                 for (int n = 0; n < kPointsPerCore; ++n) {
-                    double pdf = 0;
-                    const double t = sampleTruncatedNormal((n + uPoints) / kPointsPerCore, iv.centre, iv.sigma, lo, hi, &pdf);
+                    const double u = (n + uPoints) / kPointsPerCore;
+                    double pdf = 0, t = 0;
+                    if (u < uniformShare) t = lo + (u / uniformShare) * (hi - lo);
+                    else t = sampleTruncatedNormal((u - uniformShare) / (1 - uniformShare), iv.centre, iv.sigma, lo, hi, &pdf);
+                    pdf = (1 - uniformShare) * truncatedNormalPdf(t, iv.centre, iv.sigma, lo, hi) + (uniformShare > 0 ? uniformShare / (hi - lo) : 0.0);
                     if (!(pdf > 0)) continue;
                     const Vec3 y = ray.at(t);
                     const double E = beam.profile->irradiance(y, side, beam.lambdaNm) * kMm2PerM2 * beam.weight;

@@ -19,6 +19,9 @@ namespace {
 // sliver of medium (measured: 20 nm of a 1 µm dye layer, a 2 % loss) at every crossing.
 double leavingTMin(const Vec3& n, const Vec3& dir, double eps) { return eps / std::max(std::abs(dot(n, dir)), 1e-2); }
 
+// Where scattered emission hands over from branches to connections (emissionMis).
+constexpr double kEmissionMisDistanceMm = 0.004;
+
 SampledSpectrum clampZero(const SampledSpectrum& s) {
     SampledSpectrum r;
     for (int i = 0; i < kNumWavelengths; ++i) r[i] = std::max(0.0, s[i]);
@@ -191,12 +194,20 @@ struct PathTracer::PathState {
     // leave out at their first vertex.
     const CameraPathImaging* imaging = nullptr;
     bool firstSegment = false;
-    const CameraPathImaging* skipComputedAtStart = nullptr;
+    StartBeamWeight startBeam;  // of a sub-path's first vertex
     // The sheet-side strategy ran at the last medium vertex (prevScatter): the phase pdf of the direction
     // the path then took and the proposal's asymmetry there, for the MIS weight of a beam connection
     // at the next vertex (sheetScattering).
     bool sheetSampledAtLastVertex = false;
     double lastPhasePdf = 0, lastProposalG = 0;
+    // A camera path connected to the computed emission at its last medium vertex (emissionConnection):
+    // the branch points of the next free flight weigh the same light by the complement.
+    bool emissionSampledAtLastVertex = false;
+    // The image level of the first vertex (CameraPathImaging::imageLevel), and what branches on the
+    // first segment contributed, by their own levels.
+    int level = 0;
+    SampledSpectrum firstSegmentTotal;
+    std::array<SampledSpectrum, kImageLevels> firstSegmentPooled{};
     double tMin = 0;                // > 0 when ray.o lies on the surface the ray leaves
 };
 
@@ -220,7 +231,7 @@ PathRadiance PathTracer::meanRadiance(const Vec3& p, int medium, const SampledWa
 }
 
 PathRadiance PathTracer::traceFromEmission(const Vec3& p, int medium, const SampledWavelengths& wl, const SampledSpectrum& beta, int depth,
-                                           int generation, Rng& rng, PathStats& stats, const CameraPathImaging* skipComputed) const {
+                                           int generation, Rng& rng, PathStats& stats, StartBeamWeight startBeam) const {
     PathState state;
     state.ray = Ray{p, Vec3(0, 0, 1)};
     state.medium = medium;
@@ -229,13 +240,13 @@ PathRadiance PathTracer::traceFromEmission(const Vec3& p, int medium, const Samp
     state.depth = depth;
     state.generation = generation;
     state.startsAtEmission = true;
-    state.skipComputedAtStart = skipComputed;
+    state.startBeam = startBeam;
     return trace(state, wl, rng, stats);
 }
 
 SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double* channels, const SampledWavelengths& wl,
                                          const SampledSpectrum& weight, Rng& rng, PathStats& stats, int generation, int depth,
-                                         const CameraPathImaging* skipComputed) const {
+                                         StartBeamWeight startBeam) const {
     // Generations are ended by roulette; this cap only guards the stack and is reported if reached.
     constexpr int kMaxGenerations = 64;
     if (generation >= kMaxGenerations) {
@@ -272,11 +283,12 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double
     SampledSpectrum Lx(0.0);
     if (fluorescence_.model() == FluorescenceModel::Paper) {
         const double uLight = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform();
-        if (const auto ls = lights_.sample(p, uLight, u1, u2, wlx);
-            ls && ls->L && ls->pdf > 0 && !computedByImaging(*ls, p, wlx, skipComputed))
-            Lx = start * estimateTransmittance(p, ls->p, medium, wlx, rng, nullptr, 0.0, ls->beam, true).T * ls->L * (kInv4Pi / ls->pdf);
+        if (const auto ls = lights_.sample(p, uLight, u1, u2, wlx); ls && ls->L && ls->pdf > 0) {
+            const double w = computedByImaging(*ls, p, wlx, startBeam.imaging) ? startBeam.weight : 1.0;
+            if (w > 0) Lx = start * estimateTransmittance(p, ls->p, medium, wlx, rng, nullptr, 0.0, ls->beam, true).T * ls->L * (w * kInv4Pi / ls->pdf);
+        }
     } else {
-        Lx = traceFromEmission(p, medium, wlx, start, depth, generation + 1, rng, stats, skipComputed).total();
+        Lx = traceFromEmission(p, medium, wlx, start, depth, generation + 1, rng, stats, startBeam).total();
     }
     SampledSpectrum result(0.0);
     for (int k = 0; k < kNumWavelengths; ++k) {
@@ -288,6 +300,12 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double
 
 PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const {
     SampledSpectrum L(0.0), Lf(0.0);
+    // Everything after the first vertex is imaged at its level; first-segment branches at their own.
+    auto finish = [&] {
+        PathRadiance r{L, Lf, st.firstSegmentPooled};
+        if (st.imaging && st.level > 0) r.pooled[static_cast<size_t>(st.level)] += L + Lf - st.firstSegmentTotal;
+        return r;
+    };
     SampledSpectrum& beta = st.beta;
     SampledSpectrum& r_u = st.r_u;
     SampledSpectrum& r_l = st.r_l;
@@ -316,11 +334,12 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
     // At a surface, `surface` and `n` let the light ray leave through the side of wi (transmission).
     auto directLight = [&](const Vec3& p, int lightMedium, const SampledSpectrum& r_p, auto&& evalScatter,
                            const Vec3& nOffset, const ShapeInfo* surface, double surfaceEps,
-                           const CameraPathImaging* skipComputed) -> SampledSpectrum {
+                           StartBeamWeight startBeam) -> SampledSpectrum {
         const double uLight = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform();
         const auto ls = lights_.sample(p, uLight, u1, u2, wl);
         if (!ls || !ls->L || !(ls->pdf > 0)) return SampledSpectrum(0.0);
-        if (computedByImaging(*ls, p, wl, skipComputed)) return SampledSpectrum(0.0);
+        const double startWeight = computedByImaging(*ls, p, wl, startBeam.imaging) ? startBeam.weight : 1.0;
+        if (!(startWeight > 0)) return SampledSpectrum(0.0);
         const auto [fHat, scatterPdf] = evalScatter(ls->wi);
         if (!fHat) return SampledSpectrum(0.0);
         int startMedium = lightMedium;
@@ -338,7 +357,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                 const double pdfSheet = HenyeyGreenstein(st.lastProposalG).pdf(ls->beamProfile->direction(ls->side), -w);
                 mis = st.lastPhasePdf / (st.lastPhasePdf + pdfSheet);
             }
-            return beta * fHat * T.T * ls->L * mis / rl.average();
+            return beta * fHat * T.T * ls->L * (mis * startWeight) / rl.average();
         }
         const SampledSpectrum ru = T.r_u * r_p * scatterPdf;
         return beta * fHat * T.T * ls->L / (rl + ru).average();
@@ -404,7 +423,59 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
     // A real scattering vertex in a medium: NEE with MIS, the sheet-side strategy, then a new direction
     // from the phase function (sampled exactly, so f / pdf = 1 and beta is unchanged). `proposalG` is the
     // medium's asymmetry (the sheet-side proposal's), which an emission vertex's isotropic phase is not.
-    auto scatterInMedium = [&](const Vec3& p, const HenyeyGreenstein& phase, double proposalG, const CameraPathImaging* skipComputed) {
+    // Scattered emission: from a camera path's medium vertex, a point of the emission the camera's
+    // imaging computes (drawn by its density), connected through the medium, with the fluorescence its
+    // beams' unscattered light excites there; combined with finding that point by a branch of the next
+    // free flight. The weights split the two by distance, r²/(r² + r0²) to the connection: a branch
+    // commits the whole free flight to one direction, so a flight along a bright neurite gathers
+    // hundreds of branches, while a connection's 1/r² is what makes it noisy near the vertex. Any
+    // weights that sum to one keep the estimate unbiased.
+    auto emissionMis = [&](double distance) { return distance * distance / (distance * distance + sqr(kEmissionMisDistanceMm)); };
+    auto emissionConnection = [&](const Vec3& p, auto&& phasePdf) -> SampledSpectrum {
+        const double uCell = rng.uniform(), ux = rng.uniform(), uy = rng.uniform(), uz = rng.uniform(), uLight = rng.uniform(),
+                     uSide = rng.uniform();
+        const auto point = st.imaging->sampleEmissionPoint(uCell, ux, uy, uz);
+        if (!point || !(point->pdf > 0)) return SampledSpectrum(0.0);
+        const Vec3 d = point->p - p;
+        const double distance = length(d);
+        if (!(distance > 0)) return SampledSpectrum(0.0);
+        const Vec3 w = d / distance;
+        const double f = phasePdf(w);
+        if (!(f > 0)) return SampledSpectrum(0.0);
+        const StraightLine line = traceStraightLine(scene_, Ray{p, w}, medium, 0.0, distance, LineSurfaces::StopAtAny);
+        if (line.end != LineEnd::Open) return SampledSpectrum(0.0);
+        const int pointMedium = line.segments.empty() ? medium : line.segments.back().medium;
+        if (!fluorescence_.active(pointMedium)) return SampledSpectrum(0.0);
+        const Medium& med = scene_.media[static_cast<size_t>(pointMedium)];
+        ChannelValues ch;
+        med.channelValues(point->p, ch.data());
+        // The excitation by one beam side (chosen as next-event estimation chooses) at each of its lines.
+        const size_t count = lightList_.size();
+        const size_t index = std::min(count - 1, static_cast<size_t>(uLight * static_cast<double>(count)));
+        const BeamLight* beam = std::get_if<BeamLight>(&lightList_[index]);
+        if (!beam) return SampledSpectrum(0.0);
+        const BeamProfile& profile = *beam->profile;
+        const int side = std::min(profile.sides() - 1, static_cast<int>(uSide * profile.sides()));
+        const double select = 1.0 / (static_cast<double>(count) * profile.sides());
+        SampledSpectrum source(0.0);
+        if (!st.imaging->computesUnscatteredAt(point->p)) return source;
+        for (const SpectralLine& l : profile.spectrum().spectralLines()) {
+            if (!(l.power > 0) || !profile.inCore(point->p, side, l.lambdaNm)) continue;
+            const double E = profile.irradiance(point->p, side, l.lambdaNm) * 1e6 * l.power;
+            if (!(E > 0)) continue;
+            const double Tb = beamTransmittance(point->p, -profile.direction(side), pointMedium, SampledWavelengths::atLine(l.lambdaNm, 1.0), rng)[0];
+            if (!(Tb > 0)) continue;
+            for (int j = 0; j < kNumWavelengths; ++j)
+                source[j] += fluorescence_.kernel(pointMedium, ch.data(), l.lambdaNm, wl.lambda[j]) * kInv4Pi * E * Tb / select;
+        }
+        if (!source) return source;
+        const SampledSpectrum T = transmittance(p, point->p, medium, wl, rng);
+        if (!T) return SampledSpectrum(0.0);
+        const double mis = emissionMis(distance);
+        return beta * T * source * (f * mis / (distance * distance * point->pdf)) / r_u.average();
+    };
+
+    auto scatterInMedium = [&](const Vec3& p, const HenyeyGreenstein& phase, double proposalG, StartBeamWeight startBeam) {
         const Vec3 dirIn = ray.d;
         L += directLight(
             p, medium, r_u,
@@ -412,8 +483,11 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                 const double v = phase.pdf(dirIn, wi);
                 return std::pair{SampledSpectrum(v), v};
             },
-            Vec3(), nullptr, 0.0, skipComputed);
+            Vec3(), nullptr, 0.0, startBeam);
         const bool sheets = sheetLinesAt(wl);
+        // Camera paths (not sub-paths) at emission wavelengths connect to the computed emission.
+        const bool emission = st.imaging && !st.startsAtEmission && st.generation == 0 && !wl.discrete && fluorescence_.active();
+        if (emission) Lf += emissionConnection(p, [&](const Vec3& wi) { return phase.pdf(dirIn, wi); });
         if (sheets) L += sheetScattering(p, proposalG, [&](const Vec3& wi) { return phase.pdf(dirIn, wi); });
         double phasePdf = 0;
         const Vec3 wi = phase.sample(dirIn, rng.uniform(), rng.uniform(), &phasePdf);
@@ -421,6 +495,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         prevScatter = p;
         lightSampledAtLastVertex = true;
         st.sheetSampledAtLastVertex = sheets;
+        st.emissionSampledAtLastVertex = emission;
         st.lastPhasePdf = phasePdf;
         st.lastProposalG = proposalG;
         ray = Ray{p, wi};
@@ -429,7 +504,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
     if (st.startsAtEmission) {
         static const HenyeyGreenstein isotropic(0.0);
         const double g = medium != kNone ? scene_.media[static_cast<size_t>(medium)].phase().g() : 0.0;
-        scatterInMedium(ray.o, isotropic, g, st.skipComputedAtStart);
+        scatterInMedium(ray.o, isotropic, g, st.startBeam);
     }
 
     while (true) {
@@ -486,11 +561,24 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                             const SampledSpectrum r_e = r_u * sigmaB * Tm / pdf;
                             if (r_e) {
                                 const Vec3 y = ray.at(t);
-                                // On the first segment the branch point is the vertex the camera images.
-                                const CameraPathImaging* imaging = st.firstSegment ? st.imaging : nullptr;
+                                // On the first segment the branch point is the vertex the camera images, and the
+                                // camera's imaging computes its unscattered excitation; after a connection to
+                                // the computed emission, that excitation is weighed against it.
+                                StartBeamWeight startBeam;
                                 SampledSpectrum w = beta * Tm / (pdf * r_e.average());
-                                if (imaging) w *= imaging->firstVertexWeight(y, wl);
-                                Lf += fluorescence(y, medium, ch.data(), wl, w, rng, stats, st.generation, depth, imaging);
+                                if (st.firstSegment && st.imaging) {
+                                    w *= st.imaging->firstVertexWeight(y, wl);
+                                    startBeam = {st.imaging, 0.0};
+                                } else if (st.emissionSampledAtLastVertex) {
+                                    const double mis = st.imaging->emissionPointPdf(y) > 0 ? 1 - emissionMis(length(y - prevScatter)) : 1.0;
+                                    startBeam = {st.imaging, mis};
+                                }
+                                const SampledSpectrum branch = fluorescence(y, medium, ch.data(), wl, w, rng, stats, st.generation, depth, startBeam);
+                                Lf += branch;
+                                if (st.firstSegment && st.imaging) {
+                                    st.firstSegmentTotal += branch;
+                                    if (const int k = st.imaging->imageLevel(y); k > 0) st.firstSegmentPooled[static_cast<size_t>(k)] += branch;
+                                }
                             }
                         }
                         const SampledSpectrum ratio = Tm * sigmaBBar / (Tm[0] * sigmaBBar[0]);
@@ -521,10 +609,13 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                             return false;
                         }
                         const Vec3 y = ray.at(t);
-                        if (st.firstSegment && st.imaging) beta *= st.imaging->firstVertexWeight(y, wl);
+                        if (st.firstSegment && st.imaging) {
+                            beta *= st.imaging->firstVertexWeight(y, wl);
+                            st.level = st.imaging->imageLevel(y);
+                        }
                         st.firstSegment = false;
                         if (beta && r_u) {
-                            scatterInMedium(y, med.phase(), med.phase().g(), nullptr);
+                            scatterInMedium(y, med.phase(), med.phase().g(), {});
                             scattered = true;
                         }
                         return false;
@@ -539,9 +630,9 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                     }
                     return bool(beta) && bool(r_u);
                 });
-            if (terminated || !beta || !r_u) return {L, Lf};
+            if (terminated || !beta || !r_u) return finish();
             if (scattered) {
-                if (!survivesRoulette(false)) return {L, Lf};
+                if (!survivesRoulette(false)) return finish();
                 continue;
             }
             beta *= T_maj / T_maj[0];
@@ -554,8 +645,10 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         // A surface with a material is the first vertex of a camera path that has met nothing before it;
         // an emitter without one images only its own emission there.
         SampledSpectrum imagingWeight(1.0);
-        if (st.firstSegment && st.imaging && (shape.material != kNone || shape.areaLight != kNone))
+        if (st.firstSegment && st.imaging && (shape.material != kNone || shape.areaLight != kNone)) {
             imagingWeight = st.imaging->firstVertexWeight(hit->p, wl);
+            if (shape.material != kNone) st.level = st.imaging->imageLevel(hit->p);
+        }
         if (shape.material != kNone) {
             beta *= imagingWeight;
             imagingWeight = SampledSpectrum(1.0);
@@ -564,10 +657,17 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             const auto& light = std::get<AreaLight>(scene_.lights[static_cast<size_t>(shape.areaLight)]);
             const SampledSpectrum Le = lights_.emitted(light, hit->n, -ray.d, wl) * imagingWeight;
             if (Le) {
-                if (!lightSampledAtLastVertex) L += beta * Le / r_u.average();
+                SampledSpectrum c;
+                if (!lightSampledAtLastVertex) c = beta * Le / r_u.average();
                 else {
                     const double lightPdf = lights_.pdf(prevScatter, hit->shape, hit->p, hit->n);
-                    L += beta * Le / (r_u + r_l * lightPdf).average();
+                    c = beta * Le / (r_u + r_l * lightPdf).average();
+                }
+                L += c;
+                // An emitter seen directly through the first segment is imaged at its own level.
+                if (st.firstSegment && st.imaging && shape.material == kNone) {
+                    st.firstSegmentTotal += c;
+                    if (const int k = st.imaging->imageLevel(hit->p); k > 0) st.firstSegmentPooled[static_cast<size_t>(k)] += c;
                 }
             }
         }
@@ -585,6 +685,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         ++stats.surfaceBounces;
         st.firstSegment = false;
         st.sheetSampledAtLastVertex = false;
+        st.emissionSampledAtLastVertex = false;
         const Material& mat = *scene_.materials[static_cast<size_t>(shape.material)];
         // Opaque surfaces are two-sided; interfaces keep their outward orientation.
         const Vec3 n = shape.isInterface ? hit->n : faceForward(hit->n, -ray.d);
@@ -601,7 +702,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                     const SampledSpectrum f = mat.f(wo, wiLocal, wl, eta, TransportMode::Radiance) * std::abs(wiLocal.z);
                     return std::pair{f, mat.pdf(wo, wiLocal, eta)};
                 },
-                n, &shape, hit->epsilon, nullptr);
+                n, &shape, hit->epsilon, {});
         }
 
         const auto bs = mat.sample(wo, rng.uniform(), rng.uniform(), rng.uniform(), wl, eta, TransportMode::Radiance);
@@ -618,7 +719,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         if (!beta) break;
         if (!survivesRoulette(bs->specular)) break;
     }
-    return {L, Lf};
+    return finish();
 }
 
 }  // namespace fluorosim

@@ -10,7 +10,9 @@
 // inelastic source term at new (excitation) wavelengths, then continues elastically. The sub-path is
 // a full path of its own (multiple scattering, NEE, further fluorescence generations) in the full
 // model, and a single transmittance-weighted light connection in the paper's model.
+#include <array>
 #include <cstdint>
+#include <optional>
 
 #include "core/rng.h"
 #include "render/fluorescence.h"
@@ -40,8 +42,12 @@ struct PathStats {
 
 // Radiance at the camera's wavelengths, split by history: `fluorescent` has gone through at least
 // one re-emission, `elastic` never has (it includes elastically scattered excitation light).
+inline constexpr int kImageLevels = 8;
 struct PathRadiance {
     SampledSpectrum elastic, fluorescent;
+    // Of the total, what a camera's imaging pools over blocks of 2^k × 2^k pixels, by k >= 1
+    // (CameraPathImaging::imageLevel); the rest is imaged per pixel.
+    std::array<SampledSpectrum, kImageLevels> pooled{};
     SampledSpectrum total() const { return elastic + fluorescent; }
 };
 
@@ -58,6 +64,19 @@ public:
     // Whether the caller computes the fluorescence that a beam's unscattered light (at a spectral line,
     // inside the beam's core) excites at y, a point of the camera path's first straight segment.
     virtual bool computesUnscatteredAt(const Vec3& y) const = 0;
+    // Scattered emission: points of that computed emission, drawn by a density per mm³ roughly in
+    // proportion to its power, so that a camera path connects to it from where it scatters (optional).
+    struct EmissionPoint {
+        Vec3 p;
+        double pdf = 0;
+    };
+    virtual std::optional<EmissionPoint> sampleEmissionPoint(double /*uCell*/, double /*ux*/, double /*uy*/, double /*uz*/) const {
+        return std::nullopt;
+    }
+    virtual double emissionPointPdf(const Vec3& /*p*/) const { return 0.0; }
+    // How finely the light that leaves y (a first vertex) is imaged: 0 per pixel, k in [1, kImageLevels)
+    // pooled over blocks of 2^k × 2^k pixels (where y's image is a disc much wider than the block).
+    virtual int imageLevel(const Vec3& /*y*/) const { return 0; }
 };
 
 // What sampling before a camera path gave each wavelength: a caller that draws part of the path itself
@@ -67,6 +86,14 @@ public:
 struct PathStart {
     SampledSpectrum beta{1.0}, r_u{1.0};
     const CameraPathImaging* imaging = nullptr;  // none: a plain camera path
+};
+
+// How a sub-path started at a branch point weighs its first vertex's connection to a beam's unscattered
+// light where the camera's imaging computes that emission: 0 on the camera path's first segment (the
+// caller computes it), the MIS weight after a connection to the computed emission, 1 otherwise.
+struct StartBeamWeight {
+    const CameraPathImaging* imaging = nullptr;
+    double weight = 1;
 };
 
 class PathTracer {
@@ -113,14 +140,13 @@ private:
                     bool residual) const;
     PathRadiance trace(PathState& state, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;
     // A path that starts at p in an isotropic direction (a re-emission point) with throughput beta.
-    // With `skipComputed`, its first vertex leaves out what the camera's imaging computes at p.
     PathRadiance traceFromEmission(const Vec3& p, int medium, const SampledWavelengths& wl, const SampledSpectrum& beta, int depth,
-                                   int generation, Rng& rng, PathStats& stats, const CameraPathImaging* skipComputed = nullptr) const;
+                                   int generation, Rng& rng, PathStats& stats, StartBeamWeight startBeam = {}) const;
     // Radiance re-emitted at p towards the path, at the camera wavelengths, for a branch whose
     // source-term estimate is multiplied by `weight` (throughput over branch pdf, MIS-normalized).
     SampledSpectrum fluorescence(const Vec3& p, int medium, const double* channels, const SampledWavelengths& wl,
                                  const SampledSpectrum& weight, Rng& rng, PathStats& stats, int generation, int depth,
-                                 const CameraPathImaging* skipComputed) const;
+                                 StartBeamWeight startBeam) const;
     int mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const Vec3& dir, int current) const;
 
     const Scene& scene_;
