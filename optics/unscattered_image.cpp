@@ -906,52 +906,70 @@ UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<L
     }
     out.points = samples.size();
 
-    // --- 3. Transmittances on the coarse lattices: back along each beam side, and toward the objective.
+    // --- 3. Transmittances back along each beam side to where it entered the sample, and toward the
+    // objective (mean over the cone). On a coarse lattice, trilinearly interpolated, for samples of grid
+    // media; exactly at each sample of a homogeneous medium, whose object (a bead, a layer) is often
+    // thinner than the lattice and absorbs on its own.
+    auto beamTransmittance = [&](const Vec3& p, int medium, const LineSide& side) {
+        const Vec3 back = -side.profile->direction(side.side);
+        const StraightLine line = traceStraightLine(scene, Ray{p, back}, medium, 0.0, 2 * (scene.geometry.extent() + length(p)) + 1,
+                                                    LineSurfaces::UntilRefraction);
+        if (line.end == LineEnd::Blocked) return 0.0;
+        return quadratureTransmittance(scene, Ray{p, back}, line.segments, SampledWavelengths::atLine(side.lambdaNm, 1.0),
+                                       m.o.transmittanceQuadratureVoxels)[0];
+    };
+    SampledWavelengths cameraWl;
+    for (int j = 0; j < kCameraWavelengths; ++j) {
+        cameraWl.lambda[static_cast<size_t>(j)] = m.cameraLambda[static_cast<size_t>(j)];
+        cameraWl.pdf[static_cast<size_t>(j)] = 1;
+    }
+    const QuadratureRule rings = gaussLegendre01(m.o.coneRings);
+    auto cameraTransmittance = [&](const Vec3& p, double dz) {
+        SampledSpectrum sum(0.0);
+        for (size_t r = 0; r < rings.nodes.size(); ++r) {
+            const double cosT = 1 - rings.nodes[r] * (1 - plane.cosMax());
+            for (int a = 0; a < m.o.coneAzimuths; ++a) {
+                const Vec3 w = plane.coneDirection(cosT, 2 * kPi * (a + 0.5) / m.o.coneAzimuths);
+                // The camera path that reaches p along -w starts at the working distance above the
+                // focal plane, in the camera's medium.
+                const double distance = (plane.workingDistanceMm() - dz) / cosT;
+                if (!(distance > 0)) continue;
+                const Ray ray{p + w * distance, -w};
+                const StraightLine line = traceStraightLine(scene, ray, scene.camera.medium, 0.0, distance, LineSurfaces::StopAtAny);
+                if (line.end != LineEnd::Open) continue;
+                sum += quadratureTransmittance(scene, ray, line.segments, cameraWl, m.o.transmittanceQuadratureVoxels) *
+                       (rings.weights[r] / m.o.coneAzimuths);
+            }
+        }
+        return sum;
+    };
     const double coarse = m.o.transmittanceStepUm / kUmPerMm;
     CoarseLattice lattice(xLeft, -yTop, zLow, -xLeft, yTop, m.halfDepthMm, coarse);
-    for (const Sample& s : samples) lattice.require(s.x, s.y, s.dz);
+    std::vector<size_t> exactSamples;  // indices of samples in homogeneous media
+    for (size_t n = 0; n < samples.size(); ++n) {
+        if (scene.media[static_cast<size_t>(samples[n].medium)].isHomogeneous()) exactSamples.push_back(n);
+        else lattice.require(samples[n].x, samples[n].y, samples[n].dz);
+    }
     std::vector<std::vector<double>> beamT(lineSides.size());
-    for (size_t ls = 0; ls < lineSides.size(); ++ls) {
-        const LineSide& side = lineSides[ls];
-        const SampledWavelengths wl = SampledWavelengths::atLine(side.lambdaNm, 1.0);
+    for (size_t ls = 0; ls < lineSides.size(); ++ls)
         lattice.compute<double>(threads, [&](double x, double y, double dz) {
             const Vec3 p = plane.world(x, y, dz);
-            const Vec3 back = -side.profile->direction(side.side);
-            const StraightLine line = traceStraightLine(scene, Ray{p, back}, mediumAt(scene, p, plane.axis()), 0.0,
-                                                        2 * (scene.geometry.extent() + length(p)) + 1, LineSurfaces::UntilRefraction);
-            if (line.end == LineEnd::Blocked) return 0.0;
-            return quadratureTransmittance(scene, Ray{p, back}, line.segments, wl, m.o.transmittanceQuadratureVoxels)[0];
+            return beamTransmittance(p, mediumAt(scene, p, plane.axis()), lineSides[ls]);
         }, beamT[ls]);
-    }
     std::vector<SampledSpectrum> cameraT;
-    {
-        SampledWavelengths wl;
-        for (int j = 0; j < kCameraWavelengths; ++j) {
-            wl.lambda[static_cast<size_t>(j)] = m.cameraLambda[static_cast<size_t>(j)];
-            wl.pdf[static_cast<size_t>(j)] = 1;
-        }
-        const QuadratureRule rings = gaussLegendre01(m.o.coneRings);
-        const double cosMax = plane.cosMax();
-        lattice.compute<SampledSpectrum>(threads, [&](double x, double y, double dz) {
-            const Vec3 p = plane.world(x, y, dz);
-            SampledSpectrum sum(0.0);
-            for (size_t r = 0; r < rings.nodes.size(); ++r) {
-                const double cosT = 1 - rings.nodes[r] * (1 - cosMax);
-                for (int a = 0; a < m.o.coneAzimuths; ++a) {
-                    const Vec3 w = plane.coneDirection(cosT, 2 * kPi * (a + 0.5) / m.o.coneAzimuths);
-                    // The camera path that reaches p along -w starts at the working distance above the
-                    // focal plane, in the camera's medium.
-                    const double distance = (plane.workingDistanceMm() - dz) / cosT;
-                    if (!(distance > 0)) continue;
-                    const Ray ray{p + w * distance, -w};
-                    const StraightLine line = traceStraightLine(scene, ray, scene.camera.medium, 0.0, distance, LineSurfaces::StopAtAny);
-                    if (line.end != LineEnd::Open) continue;
-                    sum += quadratureTransmittance(scene, ray, line.segments, wl, m.o.transmittanceQuadratureVoxels) * (rings.weights[r] / m.o.coneAzimuths);
-                }
-            }
-            return sum;
-        }, cameraT);
-    }
+    lattice.compute<SampledSpectrum>(threads, [&](double x, double y, double dz) { return cameraTransmittance(plane.world(x, y, dz), dz); },
+                                     cameraT);
+    // Exact values of the homogeneous media's samples: [exact index × line sides + side] and per sample.
+    std::vector<double> exactBeamT(exactSamples.size() * lineSides.size());
+    std::vector<SampledSpectrum> exactCameraT(exactSamples.size());
+    std::vector<int64_t> exactIndex(samples.size(), -1);
+    for (size_t k = 0; k < exactSamples.size(); ++k) exactIndex[exactSamples[k]] = static_cast<int64_t>(k);
+    parallelFor(exactSamples.size(), threads, [&](size_t k) {
+        const Sample& s = samples[exactSamples[k]];
+        const Vec3 p = plane.world(s.x, s.y, s.dz);
+        for (size_t ls = 0; ls < lineSides.size(); ++ls) exactBeamT[k * lineSides.size() + ls] = beamTransmittance(p, s.medium, lineSides[ls]);
+        exactCameraT[k] = cameraTransmittance(p, s.dz);
+    });
 
     // --- 4. Weights: per sample and dye, the photoelectrons and where they land (pixel coordinates
     // in the region image, axial layer position).
@@ -981,11 +999,12 @@ UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<L
             if (!side.profile->inCore(p, side.side, side.lambdaNm)) continue;
             const double E = side.profile->irradiance(p, side.side, side.lambdaNm) * kMm2PerM2 * side.weight;
             if (!(E > 0)) continue;
-            excitation[side.line] += E * lattice.interpolate(s.x, s.y, s.dz, beamT[ls]);
+            const int64_t exact = exactIndex[n];
+            excitation[side.line] += E * (exact >= 0 ? exactBeamT[static_cast<size_t>(exact) * lineSides.size() + ls] : lattice.interpolate(s.x, s.y, s.dz, beamT[ls]));
             lit = true;
         }
         if (!lit) return;
-        const SampledSpectrum Tcam = lattice.interpolate(s.x, s.y, s.dz, cameraT);
+        const SampledSpectrum Tcam = exactIndex[n] >= 0 ? exactCameraT[static_cast<size_t>(exactIndex[n])] : lattice.interpolate(s.x, s.y, s.dz, cameraT);
         size_t slot = n * termsPerMedium;
         for (size_t ti = 0; ti < m.terms.size(); ++ti) {
             const DyeTerm& t = m.terms[ti];

@@ -263,7 +263,7 @@ TEST(AcquireCli, BadNumbersAreRejectedNotCast) {
         {{}, {"--planes", "0"}, {"--planes", "0"}},
         {{}, {"--step", "-1um"}, {"--step"}},
         {{}, {"--estimator", "fast"}, {"--estimator", "fast"}},
-        {{}, {"--direct-spp", "0"}, {"--direct-spp", "0"}},
+        {{}, {"--direct-spp", "32"}, {"--direct-spp", "removed"}},
         {{}, {"--noise-ratio", "-0.5"}, {"--noise-ratio", "-0.5"}},
         {{}, {"--noise-ratio", "inf"}, {"--noise-ratio", "inf"}},
         {{}, {"--max-spp", "64"}, {"--max-spp", "--noise-ratio"}},
