@@ -22,6 +22,9 @@ double leavingTMin(const Vec3& n, const Vec3& dir, double eps) { return eps / st
 // Where scattered emission hands over from branches to connections (emissionMis).
 constexpr double kEmissionMisDistanceMm = 0.004;
 
+// Balance heuristic between the sheet-side strategy (density a per point) and phase sampling (b).
+double sheetMis(double a, double b) { return a + b > 0 ? a / (a + b) : 0.0; }
+
 SampledSpectrum clampZero(const SampledSpectrum& s) {
     SampledSpectrum r;
     for (int i = 0; i < kNumWavelengths; ++i) r[i] = std::max(0.0, s[i]);
@@ -199,7 +202,7 @@ struct PathTracer::PathState {
     // the path then took and the proposal's asymmetry there, for the MIS weight of a beam connection
     // at the next vertex (sheetScattering).
     bool sheetSampledAtLastVertex = false;
-    double lastPhasePdf = 0, lastProposalG = 0;
+    double lastPhasePdf = 0, lastProposalG = 0, lastFloorExtinction = 0;
     // A camera path connected to the computed emission at its last medium vertex (emissionConnection):
     // the branch points of the next free flight weigh the same light by the complement.
     bool emissionSampledAtLastVertex = false;
@@ -352,10 +355,21 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             // A medium vertex inside a beam's core reached by a phase-sampled direction from a vertex
             // where the sheet-side strategy also ran: the balance heuristic over that direction.
             double mis = 1;
-            if (!surface && ls->beam && wl.discrete && st.sheetSampledAtLastVertex && ls->beamProfile->inCore(p, ls->side, wl.lambda[0])) {
-                const Vec3 w = normalize(p - prevScatter);
-                const double pdfSheet = HenyeyGreenstein(st.lastProposalG).pdf(ls->beamProfile->direction(ls->side), -w);
-                mis = st.lastPhasePdf / (st.lastPhasePdf + pdfSheet);
+            if (!surface && ls->beam && wl.discrete && st.sheetSampledAtLastVertex) {
+                const Vec3 d = p - prevScatter;
+                const double t = length(d);
+                const Vec3 w = d / t;
+                const BeamCore core = coreAhead(*ls->beamProfile, Ray{prevScatter, w}, ls->side, wl.lambda[0]);
+                double pdfPoint = 0;
+                for (int k = 0; k < core.count; ++k) pdfPoint += corePointPdf(t, core.intervals[static_cast<size_t>(k)]);
+                if (pdfPoint > 0) {
+                    const Medium& med = scene_.media[static_cast<size_t>(lightMedium)];
+                    ChannelValues ch;
+                    med.channelValues(p, ch.data());
+                    const double sigmaS = med.scatteringAt(wl.lambda[0]) * ch[kScatteringChannel];
+                    const double pdfSheet = HenyeyGreenstein(st.lastProposalG).pdf(ls->beamProfile->direction(ls->side), -w);
+                    mis = 1 - sheetMis(kPointsPerCore * pdfPoint * pdfSheet, st.lastPhasePdf * sigmaS * std::exp(-st.lastFloorExtinction * t));
+                }
             }
             return beta * fHat * T.T * ls->L * (mis * startWeight) / rl.average();
         }
@@ -366,11 +380,13 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
     // Sheet-side sampling of the beam light that scattered once in a beam's core on its way to p, for
     // paths at a beam's line: a direction from the Henyey–Greenstein lobe (asymmetry proposalG) around
     // the beam's axis, and the core integrated along the line from p in that direction (core points,
-    // one transmittance pick). Combined with phase sampling by the balance heuristic over the
-    // direction: a phase-sampled path that next scatters inside the core weighs its beam connection
-    // by the complement (directLight). Without it that connection alone finds this light, with the
-    // core's irradiance as weight and the core's thinness as probability: fireflies.
-    auto sheetScattering = [&](const Vec3& p, double proposalG, auto&& phasePdf) -> SampledSpectrum {
+    // one transmittance pick). A phase-sampled path that next scatters inside the core finds the same
+    // light; the balance heuristic weighs both over the direction and the distance t along it: this
+    // strategy's density per point is its points × their density × the lobe's pdf, the phase-sampled
+    // path's the phase pdf × σs × the floor transmittance to t. Phase sampling alone finds this light
+    // with the core's irradiance as weight and the core's thinness as probability (fireflies); this
+    // strategy alone is noisy where the phase lobe at p is narrow and the sheet's is not.
+    auto sheetScattering = [&](const Vec3& p, double proposalG, double floorExtinction, auto&& phasePdf) -> SampledSpectrum {
         const size_t count = lightList_.size();
         const double uLight = rng.uniform(), uSide = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform(), uPoints = rng.uniform(),
                      uPick = rng.uniform();
@@ -389,34 +405,54 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         const double f = phasePdf(w);
         if (!(f > 0) || !(pdfSheet > 0)) return SampledSpectrum(0.0);
         const Ray line{p, w};
-        const StraightLine straight = traceStraightLine(scene_, line, medium, 0.0, std::numeric_limits<double>::infinity(), LineSurfaces::StopAtAny);
         const double lambda = wl.lambda[0];
-        std::vector<CorePoint> points;
-        const double total = addCorePoints(scene_, BeamLine{&profile, lambda, power}, 0, line, straight.segments, uPoints,
-                                           [&](int m, int s) {
-                                               std::array<double, kMaxMediumChannels> perChannel{};
-                                               if (s == side) {
-                                                   const Medium& med = scene_.media[static_cast<size_t>(m)];
-                                                   perChannel[kScatteringChannel] = med.scatteringAt(lambda) * med.phase().pdf(axis, travel);
-                                               }
-                                               return perChannel;
-                                           },
-                                           points);
+        const BeamCore core = coreAhead(profile, line, side, lambda);
+        if (core.count == 0) return SampledSpectrum(0.0);
+        const StraightLine straight = traceStraightLine(scene_, line, medium, 0.0, std::numeric_limits<double>::infinity(), LineSurfaces::StopAtAny);
+        // Core points, each weighed against a phase-sampled path scattering there (sheetMis).
+        struct Point {
+            Vec3 y;
+            int medium;
+            double weight;
+        };
+        std::array<Point, 2 * kPointsPerCore> points{};
+        int n = 0;
+        double total = 0;
+        ChannelValues ch;
+        for (int k = 0; k < core.count; ++k)
+            for (int i = 0; i < kPointsPerCore; ++i) {
+                double pdf = 0;
+                const double t = sampleCorePoint((i + uPoints) / kPointsPerCore, core.intervals[static_cast<size_t>(k)], &pdf);
+                if (!(pdf > 0)) continue;
+                const auto seg = std::find_if(straight.segments.begin(), straight.segments.end(),
+                                              [&](const RaySegment& s) { return t >= s.t0 && t < s.t1; });
+                if (seg == straight.segments.end() || seg->medium == kNone) continue;
+                const Medium& med = scene_.media[static_cast<size_t>(seg->medium)];
+                if (med.isVacuumLike()) continue;
+                const Vec3 y = line.at(t);
+                med.channelValues(y, ch.data());
+                const double sigmaS = med.scatteringAt(lambda) * ch[kScatteringChannel];
+                const double E = profile.irradiance(y, side, lambda) * 1e6 * power;
+                const double source = sigmaS * med.phase().pdf(axis, travel) * E;
+                if (!(source > 0)) continue;
+                const double mis = sheetMis(kPointsPerCore * pdf * pdfSheet, f * sigmaS * std::exp(-floorExtinction * t));
+                points[static_cast<size_t>(n++)] = {y, seg->medium, mis * source / (kPointsPerCore * pdf)};
+                total += points[static_cast<size_t>(n - 1)].weight;
+            }
         if (!(total > 0)) return SampledSpectrum(0.0);
         // One point, picked in proportion to its weight, carries the transmittances for all.
         double target = uPick * total, acc = 0;
-        size_t pick = 0;
-        for (; pick + 1 < points.size(); ++pick) {
-            acc += points[pick].weight;
+        int pick = 0;
+        for (; pick + 1 < n; ++pick) {
+            acc += points[static_cast<size_t>(pick)].weight;
             if (acc > target) break;
         }
-        const CorePoint& z = points[pick];
+        const Point& z = points[static_cast<size_t>(pick)];
         const SampledSpectrum T = transmittance(p, z.y, medium, wl, rng);
         if (!T) return SampledSpectrum(0.0);
         const SampledSpectrum Tb = beamTransmittance(z.y, -axis, z.medium, wl, rng);
         const double select = 1.0 / (static_cast<double>(count) * profile.sides());
-        const double mis = pdfSheet / (f + pdfSheet);
-        return beta * T * Tb * (total * f * mis / (pdfSheet * select)) / r_u.average();
+        return beta * T * Tb * (total * f / (pdfSheet * select)) / r_u.average();
     };
     auto sheetLinesAt = [&](const SampledWavelengths& w) { return w.discrete && hasBeams_; };
 
@@ -488,13 +524,20 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         // Camera paths (not sub-paths) at emission wavelengths connect to the computed emission.
         const bool emission = st.imaging && !st.startsAtEmission && st.generation == 0 && !wl.discrete && fluorescence_.active();
         if (emission) Lf += emissionConnection(p, [&](const Vec3& wi) { return phase.pdf(dirIn, wi); });
-        if (sheets) L += sheetScattering(p, proposalG, [&](const Vec3& wi) { return phase.pdf(dirIn, wi); });
+        double floorExtinction = 0;  // at the line, in the medium at p: the phase-sampled side's density proxy
+        if (sheets && medium != kNone) {
+            const Medium& med = scene_.media[static_cast<size_t>(medium)];
+            const MediumSample fl = med.spectra(wl).at(med.channelFloor().data());
+            floorExtinction = fl.sigmaA[0] + fl.sigmaS[0];
+        }
+        if (sheets) L += sheetScattering(p, proposalG, floorExtinction, [&](const Vec3& wi) { return phase.pdf(dirIn, wi); });
         double phasePdf = 0;
         const Vec3 wi = phase.sample(dirIn, rng.uniform(), rng.uniform(), &phasePdf);
         r_l = r_u / phasePdf;
         prevScatter = p;
         lightSampledAtLastVertex = true;
         st.sheetSampledAtLastVertex = sheets;
+        st.lastFloorExtinction = floorExtinction;
         st.emissionSampledAtLastVertex = emission;
         st.lastPhasePdf = phasePdf;
         st.lastProposalG = proposalG;
