@@ -154,6 +154,7 @@ void addPooledParts(const Rows& rows, int width, int height, PlaneImage& r, SumO
                 r.electrons[pixel] += m;
                 variance[pixel] += v;
                 r.pathElectrons += m;
+                r.pooledElectrons += m;
             }
         }
     }

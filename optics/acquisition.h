@@ -67,6 +67,7 @@ struct PlaneImage {
     bool complete = true;  // false when cancelled before every row was done
     // Split estimator: the computed part and the paths' part, summed over pixels, and the time of each.
     double computedElectrons = 0, pathElectrons = 0;
+    double pooledElectrons = 0;  // of the paths' part, what was pooled over pixel blocks (far from focus)
     double computedSeconds = 0, pathSeconds = 0;  // wall time of the computed part, thread time of the paths
     uint64_t computedPoints = 0;                  // emission points of the computed part's quadrature
     // Paths traced for the estimate and for adaptive sampling's pilots (0 without a noise target).

@@ -106,7 +106,7 @@ std::shared_ptr<const WidefieldPsf> makePsf(const Scene& scene, const ObjectiveO
     // Under a mismatch the pupil's phase does not scale with λ: tables at nodes across the emission.
     std::vector<double> nodes;
     if (pupil.sampleIndex != pupil.immersionIndex)
-        for (int k = -4; k <= 4; ++k) nodes.push_back(emissionNm + 15.0 * k);
+        for (int k = -2; k <= 2; ++k) nodes.push_back(emissionNm + 30.0 * k);
     return std::make_shared<const WidefieldPsf>(pupil, table, nodes);
 }
 

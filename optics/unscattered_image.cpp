@@ -131,6 +131,7 @@ struct UnscatteredModel::Impl {
     std::vector<double> splitInnerMm;  // per bin
     std::vector<int> layerBin;
     double cutMm = 0;  // largest PSF cut radius over the detected band
+    int pixelNodes = 3;  // Gauss–Legendre nodes per pixel axis: at least pixelQuadrature, more for a sharp PSF
     // Kernels, built on first use: per term, layer and sub-pixel phase, values[(dy + R) side + dx + R];
     // under them the radial profile of each term and layer.
     struct PhaseKernel {
@@ -243,7 +244,7 @@ const UnscatteredModel::Impl::PhaseKernel& UnscatteredModel::Impl::kernel(size_t
         if (phaseX > F / 2) copyFrom(kernel(term, layer, F - phaseX, phaseY), true, false, false);
         else if (phaseY > F / 2) copyFrom(kernel(term, layer, phaseX, F - phaseY), false, true, false);
         else if (phaseX > phaseY) copyFrom(kernel(term, layer, phaseY, phaseX), false, false, true);
-        else integratePixels(radial(term, layer).table, double(phaseX) / F, double(phaseY) / F, k.radius, gaussLegendre01(o.pixelQuadrature), pixelMm,
+        else integratePixels(radial(term, layer).table, double(phaseX) / F, double(phaseY) / F, k.radius, gaussLegendre01(pixelNodes), pixelMm,
                              k.values.data());
         kernels[index] = std::move(k);
     });
@@ -332,6 +333,22 @@ UnscatteredModel::UnscatteredModel(const Scene& scene, const std::vector<Light>&
             lambdaMin = std::min(lambdaMin, l);
         }
     m.cutMm = m.psf->cutRadiusMm(lambdaMax);
+    // Pixel integration: the PSF holds spatial frequencies up to 2 NA/λ, k = pixel × 2 NA/λ cycles per
+    // pixel, and n Gauss–Legendre nodes integrate e^{2πikx} over a pixel to 1e-4 for k <= (n − 3)/2
+    // (tests/optics/unscattered_image_test.cpp). λ: the shortest wavelength with 1e-3 of the detected
+    // band below it.
+    {
+        double below = 0, lambdaShort = hi;
+        for (int c = 0; c < cells; ++c) {
+            below += channelDensity[static_cast<size_t>(c)] / static_cast<double>(m.terms.size());
+            if (below >= 1e-3) {
+                lambdaShort = lo + c * (hi - lo) / cells;
+                break;
+            }
+        }
+        const double cyclesPerPixel = m.pixelMm * 2 * plane.psf().pupil().na / (lambdaShort * 1e-6);
+        m.pixelNodes = std::clamp(static_cast<int>(std::ceil(2 * cyclesPerPixel + 3)), m.o.pixelQuadrature, 32);
+    }
     const double dzLimit = m.psf->maxDzMm(lambdaMin);
     double depth = 0;
     {
@@ -389,7 +406,7 @@ UnscatteredModel::UnscatteredModel(const Scene& scene, const std::vector<Light>&
             mean.nodeLambda.push_back(t.nodeLambda[q]);
             mean.nodeWeight.push_back(t.nodeWeight[q] * t.detected / meanTotal);
         }
-    const QuadratureRule q = gaussLegendre01(m.o.pixelQuadrature);
+    const QuadratureRule q = gaussLegendre01(m.pixelNodes);
     const int side = 2 * m.farRadius + 1;
     for (int b = 0; b < m.bins; ++b) {
         const double dz = -m.halfDepthMm + (b + 0.5) * binMm;
@@ -701,8 +718,8 @@ UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<L
                 for (int ci = cellLo; ci < 8; ++ci) {
                     const int64_t gi = 8 * b[0] + ci, gj = 8 * b[1] + cj, gk = 8 * b[2] + ck;
                     bool any = false;
-                    const int corners = nearest ? 1 : 8;
-                    for (int c = 0; c < corners && !any; ++c)
+                    const int cornerCount = nearest ? 1 : 8;
+                    for (int c = 0; c < cornerCount && !any; ++c)
                         for (const DenseChannel& d : dense)
                             any = any || d.v[static_cast<size_t>(((ck + 1 + ((c >> 2) & 1)) * 10 + cj + 1 + ((c >> 1) & 1)) * 10 + ci + 1 + (c & 1))] > 0;
                     if (!any) continue;
@@ -847,8 +864,8 @@ UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<L
                             Sample s{col.x, col.y, m.halfDepthMm - t, col.area * h * gl.weights[n], seg.medium, {}};
                             ChannelValues values;
                             medium.channelValues(down.at(t), values.data());
-                            for (int c = kFirstDyeChannel; c < medium.channelCount(); ++c)
-                                s.dyes[static_cast<size_t>(c - kFirstDyeChannel)] = static_cast<float>(values[static_cast<size_t>(c)]);
+                            for (int dc = kFirstDyeChannel; dc < medium.channelCount(); ++dc)
+                                s.dyes[static_cast<size_t>(dc - kFirstDyeChannel)] = static_cast<float>(values[static_cast<size_t>(dc)]);
                             local.push_back(s);
                         }
                 }

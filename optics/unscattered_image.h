@@ -21,7 +21,9 @@
 //    from `coneRings` × `coneAzimuths` directions (Gauss–Legendre in cos θ, uniform in azimuth), at
 //    four wavelengths across the channel's detected band;
 //  - PSF: per dye the polychromatic PSF over `spectralNodes` quantiles of its detected emission,
-//    integrated over each pixel by `pixelQuadrature`² Gauss–Legendre points, tabulated at
+//    integrated over each pixel by n² Gauss–Legendre points (n at least `pixelQuadrature`, and at
+//    least 2k + 3 for a PSF band of k = pixel × 2 NA/λ cycles per pixel: a PSF narrower than the
+//    pixel is otherwise integrated wrongly by up to ±20 % depending on where the point lies), tabulated at
 //    `kernelPhases` sub-pixel positions per axis and at the lattice's axial layers (points between them
 //    are split linearly); within a few pixels of each point (beyond the defocus disc) exactly, beyond
 //    that on the pixel grid by FFT convolution in axial bins of `farBinUm`, with bilinear deposits.

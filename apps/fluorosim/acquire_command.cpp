@@ -103,7 +103,7 @@ void runAcquire(const AcquireArgs& a) {
     optics::StackCallbacks cb;
     cb.progress = [&](double f) { bar.update(f); };
     PathStats stats;
-    double seconds = 0, largest = 0, largestOverPixel = 0, computedSum = 0, pathSum = 0, computedSeconds = 0, pathSeconds = 0;
+    double seconds = 0, largest = 0, largestOverPixel = 0, computedSum = 0, pathSum = 0, pooledSum = 0, computedSeconds = 0, pathSeconds = 0;
     std::vector<double> pathRel;       // relative standard errors over the brightest pixels
     std::vector<double> mcOverCamera;  // MC variance over the camera's noise variance, brightest pixels
     uint64_t pathSamples = 0, pilotSamples = 0, pixels = 0, computedPoints = 0, nonFinite = 0;
@@ -116,6 +116,7 @@ void runAcquire(const AcquireArgs& a) {
         largestOverPixel = std::max(largestOverPixel, image.largestSampleOverPixel);
         computedSum += image.computedElectrons;
         pathSum += image.pathElectrons;
+        pooledSum += image.pooledElectrons;
         computedSeconds += image.computedSeconds;
         pathSeconds += image.pathSeconds;
         computedPoints += image.computedPoints;
@@ -175,6 +176,7 @@ void runAcquire(const AcquireArgs& a) {
                                     {"spp", o.spp},
                                     {"estimator", optics::estimatorName(o.estimator)},
                                     {"computed_electrons_fraction", computedSum / std::max(1e-300, computedSum + pathSum)},
+                                    {"pooled_electrons_fraction", pooledSum / std::max(1e-300, computedSum + pathSum)},
                                     {"computed_seconds", computedSeconds},
                                     {"computed_points", computedPoints},
                                     {"path_thread_seconds", pathSeconds},

@@ -24,7 +24,7 @@ struct PlaneHeader {
     int32_t width, height;
     uint8_t complete;
     double seconds, largestSample, largestSampleOverPixel;
-    double computedElectrons, pathElectrons, computedSeconds, pathSeconds;
+    double computedElectrons, pathElectrons, pooledElectrons, computedSeconds, pathSeconds;
     uint64_t computedPoints, pathSamples, pilotSamples, nonFiniteSamples;
     PathStats stats;
 };
@@ -36,7 +36,7 @@ std::vector<double> optics::PlaneImage::*const kArrays[kPlaneArrays] = {&optics:
 std::string encodePlane(const optics::PlaneImage& image) {
     const PlaneHeader h{image.width,          image.height,        image.complete,         image.seconds,
                         image.largestSample,  image.largestSampleOverPixel,               image.computedElectrons,
-                        image.pathElectrons,  image.computedSeconds, image.pathSeconds,   image.computedPoints,
+                        image.pathElectrons,  image.pooledElectrons, image.computedSeconds, image.pathSeconds,   image.computedPoints,
                         image.pathSamples,    image.pilotSamples,  image.nonFiniteSamples, image.stats};
     const size_t pixels = image.electrons.size();
     std::string bytes(sizeof h + kPlaneArrays * pixels * sizeof(double), '\0');
@@ -63,6 +63,7 @@ optics::PlaneImage decodePlane(std::string_view bytes) {
     image.largestSampleOverPixel = h.largestSampleOverPixel;
     image.computedElectrons = h.computedElectrons;
     image.pathElectrons = h.pathElectrons;
+    image.pooledElectrons = h.pooledElectrons;
     image.computedSeconds = h.computedSeconds;
     image.pathSeconds = h.pathSeconds;
     image.computedPoints = h.computedPoints;

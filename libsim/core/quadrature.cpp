@@ -9,7 +9,7 @@
 namespace fluorosim {
 
 QuadratureRule gaussLegendre01(int n) {
-    if (n < 1 || n > 64) throw ConfigError("Gauss-Legendre nodes must lie in [1, 64], got " + std::to_string(n));
+    if (n < 1 || n > 4096) throw ConfigError("Gauss-Legendre nodes must lie in [1, 4096], got " + std::to_string(n));
     QuadratureRule r;
     r.nodes.resize(static_cast<size_t>(n));
     r.weights.resize(static_cast<size_t>(n));

@@ -7,6 +7,6 @@ namespace fluorosim {
 struct QuadratureRule {
     std::vector<double> nodes, weights;  // weights sum to 1
 };
-QuadratureRule gaussLegendre01(int n);  // throws ConfigError for n < 1 or n > 64
+QuadratureRule gaussLegendre01(int n);  // throws ConfigError for n < 1 or n > 4096
 
 }  // namespace fluorosim

@@ -3,6 +3,8 @@
 // standard errors, on crops of a grid medium lit by a light sheet, in clear and in scattering tissue.
 // The dye lies in a filament in the sheet and in a second one 15 µm beside it, which only scattered
 // excitation reaches (the haze), so both parts of the split carry signal when the tissue scatters.
+// This test found the computed part 16 % dark: 3 x 3 points per pixel integrate a PSF narrower than
+// the pixel (NA 0.5, 1.5 um pixels) wrongly; the count now follows the PSF's band.
 #include <gtest/gtest.h>
 
 #include <cmath>
