@@ -14,6 +14,9 @@ find_package(TIFF REQUIRED)
 find_package(CLI11 CONFIG REQUIRED)
 find_package(nlohmann_json 3 REQUIRED)
 find_package(assimp REQUIRED)
+# FFTW (libfftw3-dev) has no CMake config in Debian; its pkg-config file gives an imported target.
+find_package(PkgConfig REQUIRED)
+pkg_check_modules(FFTW3 REQUIRED IMPORTED_TARGET fftw3)
 if(FLUOROSIM_WITH_VIEWER)
   # Debian's VTK 9.1 (libvtk9-dev). Only apps/viewer links it. Its config loads TBB through TBB's own
   # config, which is already loaded above, so the targets are not defined twice.

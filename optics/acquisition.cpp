@@ -7,9 +7,6 @@
 #include "core/errors.h"
 #include "core/parallel.h"
 #include "core/rng.h"
-#include "core/sobol.h"
-#include "optics/psf.h"
-#include "render/direct_beam.h"
 #include "render/fluorescence.h"
 
 namespace fluorosim::optics {
@@ -21,6 +18,11 @@ uint64_t hashName(const std::string& s) {
     uint64_t h = 0xcbf29ce484222325ULL;  // FNV-1a
     for (unsigned char c : s) h = (h ^ c) * 0x100000001b3ULL;
     return h;
+}
+
+// Photoelectrons per joule of light at λ reaching the camera: emission path, QE and photons per joule.
+std::function<double(double)> detectionOf(const Filter& emission, const DetectorOptions& detector) {
+    return [&emission, &detector](double lambda) { return emission.transmission(lambda) * detector.qe(lambda) * lambda / kPlanckTimesC; };
 }
 
 }  // namespace
@@ -35,56 +37,53 @@ std::optional<Estimator> estimatorFromName(const std::string& name) {
 
 void AcquireOptions::validate() const {
     if (spp < 1) throw ConfigError("spp must be at least 1, got " + std::to_string(spp));
-    if (directSpp < 1) throw ConfigError("direct samples per pixel must be at least 1, got " + std::to_string(directSpp));
     if (threads < 0) throw ConfigError("threads must be >= 0, got " + std::to_string(threads));
     if (noiseRatio && !(*noiseRatio > 0 && std::isfinite(*noiseRatio)))
         throw ConfigError("noise ratio must be positive and finite, got " + std::to_string(*noiseRatio));
     if (noiseRatio && (maxSpp < spp || pilotSpp < 2))
         throw ConfigError("adaptive sampling needs max spp >= spp and at least 2 pilot samples, got max " + std::to_string(maxSpp) + ", spp " +
                           std::to_string(spp) + ", pilot " + std::to_string(pilotSpp));
+    if (!(poolingFraction >= 0 && poolingFraction <= 1)) throw ConfigError("pooling fraction must lie in [0, 1], got " + std::to_string(poolingFraction));
+    unscattered.validate();
+    psf.validate();
 }
 
 uint64_t planeStreamKey(const std::string& channelName, int plane) { return mixBits(hashName(channelName) + mixBits(static_cast<uint64_t>(plane) + 1)); }
 
 namespace {
 
-// Where a camera sample starts: the focal-plane point of a pixel, displaced by the PSF, and a
-// direction from the collection cone; the ray starts at the working distance on the objective's side.
-struct PlaneCamera {
-    Vec3 right, up, axis;
-    Frame frame;
-    double pixelMm, cosMax, na, workingDistanceMm;
-    double perSample;  // object pixel area (m²) × cone solid angle × exposure: the étendue of a sample
-    Vec3 centre;
-    int width, height;
+// What the microscope puts around one camera path: the PSF weight at its first vertex, the computed
+// part the path leaves out, and that part's emission for the path to connect to after scattering.
+class PathImaging final : public CameraPathImaging {
+public:
+    PathImaging(const Imaging& imaging, const UnscatteredModel* computed, const EmissionPoints* emission, const Vec3& pixelPoint,
+                double poolingFraction)
+        : imaging_(imaging), computed_(computed), emission_(emission && !emission->empty() ? emission : nullptr), pixelPoint_(pixelPoint),
+          poolingFraction_(poolingFraction) {}
+    SampledSpectrum firstVertexWeight(const Vec3& y, const SampledWavelengths& wl) const override {
+        return imaging_.firstVertexWeight(pixelPoint_, y, wl);
+    }
+    bool computesUnscatteredAt(const Vec3& y) const override { return computed_ && computed_->covers(imaging_, y); }
+    std::optional<EmissionPoint> sampleEmissionPoint(double uCell, double ux, double uy, double uz) const override {
+        if (!emission_) return std::nullopt;
+        const EmissionPoints::Sample s = emission_->sample(uCell, ux, uy, uz);
+        return EmissionPoint{s.p, s.pdf};
+    }
+    double emissionPointPdf(const Vec3& p) const override { return emission_ ? emission_->pdf(p) : 0.0; }
+    // Blocks of 2^k pixels with 2^k <= fraction × the radius (in pixels) of y's geometric defocus disc.
+    int imageLevel(const Vec3& y) const override {
+        if (!(poolingFraction_ > 0)) return 0;
+        const double disc = std::abs(imaging_.local(y).dz) * imaging_.tanThetaMax() / imaging_.pixelMm();
+        const double block = poolingFraction_ * disc;
+        return block >= 2 ? std::min(kImageLevels - 1, static_cast<int>(std::floor(std::log2(block)))) : 0;
+    }
 
-    PlaneCamera(const ObjectiveOptions& objective, const FocalPlane& focus, const DetectorOptions& detector, int w, int h)
-        : axis(normalize(focus.towardObjective)), width(w), height(h) {
-        right = normalize(cross(focus.up, axis));
-        up = cross(axis, right);
-        frame = Frame{right, up, axis};
-        pixelMm = detector.pixelPitchUm * 1e-3 / objective.magnification;
-        cosMax = std::cos(objective.collectionHalfAngle());
-        na = objective.na;
-        workingDistanceMm = objective.workingDistanceMm;
-        perSample = pixelMm * pixelMm * 1e-6 * 2 * kPi * (1 - cosMax) * detector.exposureS;
-        centre = focus.centreMm;
-    }
-    Vec3 focalPoint(int x, int y, double ux, double uy) const {
-        return centre + right * ((x + ux - 0.5 * width) * pixelMm) + up * ((0.5 * height - (y + uy)) * pixelMm);
-    }
-    Vec3 psfOffset(double radiusMm, double uAngle) const {
-        const double a = 2 * kPi * uAngle;
-        return (right * std::cos(a) + up * std::sin(a)) * radiusMm;
-    }
-    // The ray toward the focal point from the cone (uniform in solid angle); *cosTheta for the étendue.
-    Ray ray(const Vec3& focal, double uCos, double uPhi, double* cosTheta) const {
-        const double cosT = 1 - uCos * (1 - cosMax), phi = 2 * kPi * uPhi;
-        const double sinT = std::sqrt(std::max(0.0, 1 - cosT * cosT));
-        const Vec3 toObjective = frame.toWorld(Vec3(sinT * std::cos(phi), sinT * std::sin(phi), cosT));
-        *cosTheta = cosT;
-        return Ray{focal + toObjective * workingDistanceMm, -toObjective};
-    }
+private:
+    const Imaging& imaging_;
+    const UnscatteredModel* computed_;
+    const EmissionPoints* emission_;
+    Vec3 pixelPoint_;
+    double poolingFraction_;
 };
 
 // Pilot paths of adaptive sampling draw from sample indices the estimate never reaches.
@@ -102,40 +101,106 @@ struct PixelTally {
     double varianceOfMean() const { return n > 1 ? std::max(0.0, sum2 / n - sqr(sum / n)) / (n - 1) : 0.0; }
 };
 
+// Adds the pooled parts to an image: per level k, the rows' sums of pixel means by block column become
+// block means (summed in row order, whatever the thread count), interpolated bilinearly between block
+// centres to every pixel, with their variances by the same weights squared.
+template <class Rows, class SumOf, class VarianceOf>
+void addPooledParts(const Rows& rows, int width, int height, PlaneImage& r, SumOf sumOf, VarianceOf varianceOf) {
+    std::vector<double> variance(r.electrons.size());
+    for (size_t i = 0; i < variance.size(); ++i) variance[i] = sqr(r.stderrElectrons[i]);
+    for (int k = 1; k < kImageLevels; ++k) {
+        const int block = 1 << k, bx = ((width - 1) >> k) + 1, by = ((height - 1) >> k) + 1;
+        std::vector<double> mean(static_cast<size_t>(bx) * by, 0.0), var(mean.size(), 0.0);
+        bool any = false;
+        for (int y = 0; y < height; ++y) {
+            const std::vector<double>& sum = sumOf(rows[static_cast<size_t>(y)], k);
+            if (sum.empty()) continue;
+            any = true;
+            const std::vector<double>& v = varianceOf(rows[static_cast<size_t>(y)], k);
+            for (int c = 0; c < bx; ++c) {
+                mean[static_cast<size_t>((y >> k) * bx + c)] += sum[static_cast<size_t>(c)];
+                var[static_cast<size_t>((y >> k) * bx + c)] += v[static_cast<size_t>(c)];
+            }
+        }
+        if (!any) continue;
+        for (int cy = 0; cy < by; ++cy)
+            for (int cx = 0; cx < bx; ++cx) {
+                const double pixels = double(std::min(block, width - cx * block)) * std::min(block, height - cy * block);
+                mean[static_cast<size_t>(cy * bx + cx)] /= pixels;
+                var[static_cast<size_t>(cy * bx + cx)] /= pixels * pixels;
+            }
+        auto axis = [&](int p, int blocks, int* c0, int* c1, double* f) {
+            const double u = (p + 0.5) / block - 0.5;
+            *c0 = std::clamp(static_cast<int>(std::floor(u)), 0, blocks - 1);
+            *c1 = std::min(*c0 + 1, blocks - 1);
+            *f = std::clamp(u - *c0, 0.0, 1.0);
+        };
+        for (int y = 0; y < height; ++y) {
+            int y0, y1, x0, x1;
+            double fy, fx;
+            axis(y, by, &y0, &y1, &fy);
+            for (int x = 0; x < width; ++x) {
+                axis(x, bx, &x0, &x1, &fx);
+                const std::array<std::pair<size_t, double>, 4> w{{{static_cast<size_t>(y0 * bx + x0), (1 - fx) * (1 - fy)},
+                                                                  {static_cast<size_t>(y0 * bx + x1), fx * (1 - fy)},
+                                                                  {static_cast<size_t>(y1 * bx + x0), (1 - fx) * fy},
+                                                                  {static_cast<size_t>(y1 * bx + x1), fx * fy}}};
+                double m = 0, v = 0;
+                for (const auto& [i, wi] : w) {
+                    m += wi * mean[i];
+                    v += wi * wi * var[i];
+                }
+                const size_t pixel = static_cast<size_t>(y) * width + x;
+                r.electrons[pixel] += m;
+                variance[pixel] += v;
+                r.pathElectrons += m;
+                r.pooledElectrons += m;
+            }
+        }
+    }
+    for (size_t i = 0; i < variance.size(); ++i) r.stderrElectrons[i] = std::sqrt(variance[i]);
+}
+
 PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const ObjectiveOptions& objective, const FocalPlane& focus,
                       const Filter& emission, const DetectorOptions& detector, int width, int height, uint64_t streamKey,
-                      const AcquireOptions& o) {
-    objective.validate();
-    focus.validate();
-    detector.validate();
-    o.validate();
-    if (width < 1 || height < 1) throw ConfigError("image size must be positive, got " + std::to_string(width) + " x " + std::to_string(height));
+                      const AcquireOptions& o, const ChannelImaging& channel) {
     const auto start = std::chrono::steady_clock::now();
     const WavelengthSampler wavelengths = cameraWavelengthSampler(scene, tracer.lights(), tracer.fluorescence().active());
-    const PlaneCamera camera(objective, focus, detector, width, height);
-    // Photoelectrons per unit of spectral radiance at λ: filter, QE and photons per joule.
-    const auto detection = [&](double lambda) { return emission.transmission(lambda) * detector.qe(lambda) * lambda / kPlanckTimesC; };
-    const bool split = o.estimator == Estimator::Split;
-    const DirectBeamEstimator direct(scene, tracer, detection);
-    const bool useDirect = split && direct.active();
-    // Dimensions: component, pixel area (2), PSF (2), cone (2), points along the core.
-    const std::optional<SobolTable> sobol = useDirect ? std::optional<SobolTable>(std::in_place, 8, o.directSpp) : std::nullopt;
-    static const AiryPattern airy;
+    const Imaging imaging(objective, focus, detector, width, height, channel.psf);
+    const WidefieldPsf& psf = imaging.psf();
+    const auto detection = detectionOf(emission, detector);
+    const UnscatteredModel* model = o.estimator == Estimator::Split && channel.unscattered && channel.unscattered->active()
+                                        ? channel.unscattered.get()
+                                        : nullptr;
     PlaneImage r;
     r.width = width;
     r.height = height;
     r.electrons.assign(static_cast<size_t>(width) * height, 0.0);
     r.stderrElectrons.assign(r.electrons.size(), 0.0);
-    r.directStderr.assign(r.electrons.size(), 0.0);
-    r.pathStderr.assign(r.electrons.size(), 0.0);
+    std::vector<double> computed(r.electrons.size(), 0.0);
+    std::shared_ptr<const EmissionPoints> emissionPoints;
+    if (model) {
+        const UnscatteredPlane u = computeUnscatteredImage(scene, tracer.lights(), imaging, *model, o.threads, o.cancel);
+        if (!u.complete) {
+            r.complete = false;
+            return r;
+        }
+        computed = u.electrons;
+        emissionPoints = u.emission;
+        r.computedPoints = u.points;
+        r.computedSeconds = u.seconds;
+    }
     // Each row's totals, kept apart so that threads never share them; summed into the image at the end.
     struct RowTotals {
         PathStats stats;
-        double largest = 0, direct = 0, path = 0, directSeconds = 0, pathSeconds = 0;
-        uint64_t samples = 0, pilots = 0;
+        double largest = 0, computed = 0, path = 0, pathSeconds = 0;
+        uint64_t samples = 0, pilots = 0, nonFinite = 0;
         bool done = false;
+        // Pooled parts: per level, this row's sums of its pixels' means (and their variances) by block column.
+        std::array<std::vector<double>, kImageLevels> pooledSum, pooledVariance;
     };
     std::vector<RowTotals> rows(static_cast<size_t>(height));
+    std::vector<double> largestInPixel(r.electrons.size(), 0.0);  // largest per-pixel path sample
     // Dark electrons of the exposure: part of the camera noise an adaptive target is relative to.
     const double darkElectrons = detector.darkCurrentElectronsPerS * detector.exposureS;
     int rowsDone = 0;
@@ -144,89 +209,98 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         if (o.cancel && o.cancel->load()) return;
         const int y = static_cast<int>(yRow);
         RowTotals& row = rows[yRow];
-        PathStats& stats = row.stats;
         for (int x = 0; x < width; ++x) {
             const size_t pixel = yRow * static_cast<size_t>(width) + static_cast<size_t>(x);
-            PixelTally paths, directTally;
-            double directVariance = 0;
+            PixelTally paths;
+            double largest = 0, largestOwn = 0;
             const auto t0 = std::chrono::steady_clock::now();
-            // The direct part: Owen-scrambled Sobol' points over the component, the pixel area, the PSF,
-            // the cone and the points along the core, scrambled per pixel; transmittances from a stream
-            // keyed apart from the paths'.
-            if (useDirect) {
-                const uint64_t scramble = mixBits(o.seed ^ mixBits(streamKey + pixel));
-                DirectBeamEstimator::Pixel points;
-                for (int s = 0; s < o.directSpp; ++s) {
-                    auto u = [&](int dim) { return sobol->sample(s, dim, scramble); };
-                    const DirectBeamEstimator::Component c = direct.sampleComponent(u(0));
-                    Vec3 focal = camera.focalPoint(x, y, u(1), u(2));
-                    if (o.diffraction) focal += camera.psfOffset(airy.sampleRadiusMm(u(3), c.lambdaNm, objective.na), u(4));
-                    double cosT = 0;
-                    const Ray ray = camera.ray(focal, u(5), u(6), &cosT);
-                    direct.addSample(points, ray, scene.camera.medium, c, u(7), cosT * camera.perSample);
-                }
-                Rng rng = Rng::forKey(o.seed, mixBits(streamKey + pixel) ^ 0x5DEECE66DULL, 0);
-                const DirectBeamEstimator::Estimate d = direct.finish(points, o.directPicks, rng.uniform(), rng);
-                directTally.sum = d.mean;
-                directTally.n = 1;
-                directVariance = d.variance;
-            }
-            const auto t1 = std::chrono::steady_clock::now();
+            // A sample's electrons, and the parts of them pooled at each level.
+            struct Sample {
+                double total = 0;
+                std::array<double, kImageLevels> pooled{};
+            };
             auto pathSample = [&](uint64_t s) {
                 Rng rng = Rng::forKey(o.seed, streamKey + pixel, s);
                 const SampledWavelengths wl = wavelengths.sample(rng.uniform(), rng.uniform());
-                Vec3 focal = camera.focalPoint(x, y, rng.uniform(), rng.uniform());
-                // Diffraction: the focal point moves by a sample of the hero wavelength's Airy pattern. Its
-                // density ratios p_j/p_0 and throughputs f_j/p_0 start the path, so the tracer's spectral
-                // MIS weighs the displacement together with the rest of the path.
+                const Vec3 point = imaging.pixelPoint(x, y, rng.uniform(), rng.uniform());
+                // The focal point moves by a sample of the in-focus PSF at the hero wavelength. Its density
+                // ratios p_j/p_0 and throughputs f_j/p_0 start the path, so the tracer's spectral MIS weighs
+                // the displacement together with the rest of the path.
                 PathStart pathStart;
-                pathStart.directBeamsSeparate = useDirect;
-                if (o.diffraction) {
-                    const double radius = airy.sampleRadiusMm(rng.uniform(), wl.lambda[0], objective.na);
-                    focal += camera.psfOffset(radius, rng.uniform());
-                    if (!wl.discrete) {
-                        const double hero = airy.densityPerMm2(radius, wl.lambda[0], objective.na);
-                        for (int j = 1; j < kNumWavelengths; ++j)
-                            pathStart.r_u[j] = airy.densityPerMm2(radius, wl.lambda[j], objective.na) / hero;
-                        pathStart.beta = pathStart.r_u;
-                    }
+                double radius = 0;
+                const Vec3 focal = point + imaging.displacement(rng.uniform(), rng.uniform(), wl.lambda[0], &radius);
+                if (!wl.discrete) {
+                    const double hero = psf.displacementDensity(radius, wl.lambda[0]);
+                    for (int j = 1; j < kNumWavelengths; ++j) pathStart.r_u[j] = psf.displacementDensity(radius, wl.lambda[j]) / hero;
+                    pathStart.beta = pathStart.r_u;
                 }
+                const PathImaging pathImaging(imaging, model, emissionPoints.get(), point, o.poolingFraction);
+                pathStart.imaging = &pathImaging;
                 double cosT = 0;
-                const Ray ray = camera.ray(focal, rng.uniform(), rng.uniform(), &cosT);
-                const SampledSpectrum L = tracer.radiance(ray, scene.camera.medium, wl, rng, stats, pathStart).total();
-                double e = 0;
-                for (int j = 0; j < kNumWavelengths; ++j)
-                    if (L[j] != 0 && wl.pdf[j] != 0) e += L[j] / wl.pdf[j] * detection(wl.lambda[j]);
-                e *= cosT * camera.perSample / kNumWavelengths;
-                return e;
+                const Ray ray = imaging.cameraRay(focal, rng.uniform(), rng.uniform(), &cosT);
+                const PathRadiance radiance = tracer.radiance(ray, scene.camera.medium, wl, rng, row.stats, pathStart);
+                auto electrons = [&](const SampledSpectrum& L) {
+                    double e = 0;
+                    for (int j = 0; j < kNumWavelengths; ++j)
+                        if (L[j] != 0 && wl.pdf[j] != 0) e += L[j] / wl.pdf[j] * detection(wl.lambda[j]);
+                    return e * cosT * imaging.sampleEtendue() / kNumWavelengths;
+                };
+                Sample out;
+                out.total = electrons(radiance.total());
+                for (int k = 1; k < kImageLevels; ++k)
+                    if (radiance.pooled[static_cast<size_t>(k)]) out.pooled[static_cast<size_t>(k)] = electrons(radiance.pooled[static_cast<size_t>(k)]);
+                bool finite = std::isfinite(out.total);
+                for (double e : out.pooled) finite = finite && std::isfinite(e);
+                if (!finite) {
+                    ++row.nonFinite;
+                    return Sample{};
+                }
+                return out;
             };
             int n = o.spp;
             if (o.noiseRatio) {
                 // Pilot paths from streams the estimate never uses decide how many to trace.
                 PixelTally pilot;
-                for (int s = 0; s < o.pilotSpp; ++s) pilot.add(pathSample(kPilotSample + static_cast<uint64_t>(s)));
-                const double signal = std::max(0.0, pilot.mean() + directTally.mean());
+                for (int s = 0; s < o.pilotSpp; ++s) pilot.add(pathSample(kPilotSample + static_cast<uint64_t>(s)).total);
+                const double signal = std::max(0.0, pilot.mean() + computed[pixel]);
                 const double target = sqr(*o.noiseRatio) * (signal + darkElectrons + sqr(detector.readNoiseElectrons));
                 const double perPath = pilot.varianceOfMean() * pilot.n;
-                const double room = target - directVariance;
-                const double wanted = room > 0 ? std::ceil(perPath / room) : double(o.maxSpp);
+                const double wanted = std::ceil(perPath / target);
                 n = static_cast<int>(std::clamp(wanted, double(o.spp), double(o.maxSpp)));
                 row.pilots += static_cast<uint64_t>(o.pilotSpp);
             }
+            std::array<PixelTally, kImageLevels> pooled;
             for (int s = 0; s < n; ++s) {
-                const double e = pathSample(static_cast<uint64_t>(s));
-                paths.add(e);
-                row.largest = std::max(row.largest, e);
+                const Sample e = pathSample(static_cast<uint64_t>(s));
+                double own = e.total;  // the part imaged per pixel
+                for (int k = 1; k < kImageLevels; ++k) {
+                    own -= e.pooled[static_cast<size_t>(k)];
+                    pooled[static_cast<size_t>(k)].add(e.pooled[static_cast<size_t>(k)]);
+                    largest = std::max(largest, e.pooled[static_cast<size_t>(k)] / double(1 << (2 * k)));
+                }
+                paths.add(own);
+                largest = std::max(largest, own);
+                largestOwn = std::max(largestOwn, own);
+            }
+            for (int k = 1; k < kImageLevels; ++k) {
+                const PixelTally& t = pooled[static_cast<size_t>(k)];
+                if (t.sum == 0 && t.sum2 == 0) continue;
+                std::vector<double>& sum = row.pooledSum[static_cast<size_t>(k)];
+                std::vector<double>& var = row.pooledVariance[static_cast<size_t>(k)];
+                if (sum.empty()) {
+                    sum.assign(static_cast<size_t>(((width - 1) >> k) + 1), 0.0);
+                    var.assign(sum.size(), 0.0);
+                }
+                sum[static_cast<size_t>(x >> k)] += t.mean();
+                var[static_cast<size_t>(x >> k)] += t.varianceOfMean();
             }
             row.samples += static_cast<uint64_t>(n);
-            const auto t2 = std::chrono::steady_clock::now();
-            row.directSeconds += std::chrono::duration<double>(t1 - t0).count();
-            row.pathSeconds += std::chrono::duration<double>(t2 - t1).count();
-            r.directStderr[pixel] = std::sqrt(directVariance);
-            r.pathStderr[pixel] = std::sqrt(paths.varianceOfMean());
-            r.electrons[pixel] = paths.mean() + directTally.mean();
-            r.stderrElectrons[pixel] = std::sqrt(paths.varianceOfMean() + directVariance);
-            row.direct += directTally.mean();
+            row.pathSeconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+            r.electrons[pixel] = paths.mean() + computed[pixel];
+            r.stderrElectrons[pixel] = std::sqrt(paths.varianceOfMean());
+            row.largest = std::max(row.largest, largest);
+            largestInPixel[pixel] = largestOwn;
+            row.computed += computed[pixel];
             row.path += paths.mean();
         }
         row.done = true;
@@ -234,44 +308,99 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         ++rowsDone;
         if (o.progress) o.progress(double(rowsDone) / height);
     });
+    addPooledParts(rows, width, height, r, [](const RowTotals& row, int k) -> const std::vector<double>& { return row.pooledSum[static_cast<size_t>(k)]; },
+                   [](const RowTotals& row, int k) -> const std::vector<double>& { return row.pooledVariance[static_cast<size_t>(k)]; });
+    // Heavy tails: a pixel's largest path sample against its value, where the value is above the read
+    // noise² (below it a ratio says nothing about the camera).
+    for (size_t i = 0; i < r.electrons.size(); ++i)
+        if (r.electrons[i] > std::max(1.0, sqr(detector.readNoiseElectrons)))
+            r.largestSampleOverPixel = std::max(r.largestSampleOverPixel, largestInPixel[i] / r.electrons[i]);
     for (const RowTotals& row : rows) {
         r.stats.add(row.stats);
         r.largestSample = std::max(r.largestSample, row.largest);
         r.complete = r.complete && row.done;
-        r.directElectrons += row.direct;
+        r.computedElectrons += row.computed;
         r.pathElectrons += row.path;
-        r.directSeconds += row.directSeconds;
         r.pathSeconds += row.pathSeconds;
         r.pathSamples += row.samples;
         r.pilotSamples += row.pilots;
+        r.nonFiniteSamples += row.nonFinite;
     }
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return r;
 }
 
+void checkPlaneArguments(const ObjectiveOptions& objective, const FocalPlane& focus, const DetectorOptions& detector, int width, int height,
+                         const AcquireOptions& o) {
+    objective.validate();
+    focus.validate();
+    detector.validate();
+    o.validate();
+    if (width < 1 || height < 1) throw ConfigError("image size must be positive, got " + std::to_string(width) + " x " + std::to_string(height));
+}
+
+// The centre of the channel's emission path: the wavelength the PSF's apodisation is measured at.
+double emissionCentreNm(const Filter& emission, const Scene& scene) {
+    double sum = 0, weight = 0;
+    for (double l = scene.spectral.lambdaMin; l <= scene.spectral.lambdaMax; l += 1) {
+        const double t = emission.transmission(l);
+        sum += t * l;
+        weight += t;
+    }
+    return weight > 0 ? sum / weight : 0.5 * (scene.spectral.lambdaMin + scene.spectral.lambdaMax);
+}
+
 }  // namespace
+
+ChannelImaging setUpChannelImaging(const Scene& scene, const std::vector<Light>& lights, const ObjectiveOptions& objective, const FocalPlane& focus,
+                                   const Filter& emission, const DetectorOptions& detector, int width, int height, const AcquireOptions& o) {
+    checkPlaneArguments(objective, focus, detector, width, height, o);
+    ChannelImaging c;
+    c.psf = makePsf(scene, objective, focus, emissionCentreNm(emission, scene), o.psf);
+    if (o.estimator == Estimator::Split) {
+        const FluorescencePlan plan(scene, lights);
+        const Imaging imaging(objective, focus, detector, width, height, c.psf);
+        c.unscattered = std::make_shared<const UnscatteredModel>(scene, lights, plan, imaging, detectionOf(emission, detector), o.unscattered);
+    }
+    return c;
+}
 
 PlaneImage renderPlane(const Scene& scene, std::vector<Light> lights, const ObjectiveOptions& objective, const FocalPlane& focus,
                        const Filter& emission, const DetectorOptions& detector, int width, int height, uint64_t streamKey,
-                       const AcquireOptions& options) {
+                       const AcquireOptions& options, const ChannelImaging* channel) {
+    checkPlaneArguments(objective, focus, detector, width, height, options);
     const PathTracer tracer(scene, std::move(lights));
-    return renderWith(scene, tracer, objective, focus, emission, detector, width, height, streamKey, options);
+    const ChannelImaging own = channel ? ChannelImaging{} : setUpChannelImaging(scene, tracer.lights(), objective, focus, emission, detector, width,
+                                                                                 height, options);
+    return renderWith(scene, tracer, objective, focus, emission, detector, width, height, streamKey, options, channel ? *channel : own);
 }
 
 PlaneImage renderPlane(const Scene& scene, const ObjectiveOptions& objective, const FocalPlane& focus, const Filter& emission,
                        const DetectorOptions& detector, int width, int height, const AcquireOptions& options) {
+    checkPlaneArguments(objective, focus, detector, width, height, options);
     const PathTracer tracer(scene);
-    return renderWith(scene, tracer, objective, focus, emission, detector, width, height, 0, options);
+    const ChannelImaging own = setUpChannelImaging(scene, tracer.lights(), objective, focus, emission, detector, width, height, options);
+    return renderWith(scene, tracer, objective, focus, emission, detector, width, height, 0, options, own);
 }
 
-PlaneImage acquirePlane(const Scene& scene, const Microscope& m, size_t channel, int plane, const AcquireOptions& options) {
+ChannelImaging setUpChannelImaging(const Scene& scene, const Microscope& m, size_t channel, const AcquireOptions& options) {
+    if (channel >= m.channels.size()) throw ConfigError("channel index " + std::to_string(channel) + " is out of range");
+    const MicroscopeChannel& c = m.channels[channel];
+    // The stack's centre: planes are offset symmetrically about the focus.
+    return setUpChannelImaging(scene, m.lightsAt(scene, c, 0.0), m.objective, m.focalPlaneAt(0.0), c.emissionPath, m.detector, m.width, m.height,
+                               options);
+}
+
+PlaneImage acquirePlane(const Scene& scene, const Microscope& m, size_t channel, int plane, const AcquireOptions& options,
+                        const ChannelImaging* imaging) {
     if (channel >= m.channels.size()) throw ConfigError("channel index " + std::to_string(channel) + " is out of range");
     if (plane < 0 || plane >= m.stack.planes)
         throw ConfigError("plane " + std::to_string(plane) + " is outside the stack of " + std::to_string(m.stack.planes));
     const MicroscopeChannel& c = m.channels[channel];
     const double offset = m.planeOffsetMm(plane);
-    return renderPlane(scene, m.lightsAt(scene, c, offset), m.objective, m.focalPlaneAt(offset), c.emissionPath, m.detector, m.width,
-                       m.height, planeStreamKey(c.name, plane), options);
+    const ChannelImaging own = imaging ? ChannelImaging{} : setUpChannelImaging(scene, m, channel, options);
+    return renderPlane(scene, m.lightsAt(scene, c, offset), m.objective, m.focalPlaneAt(offset), c.emissionPath, m.detector, m.width, m.height,
+                       planeStreamKey(c.name, plane), options, imaging ? imaging : &own);
 }
 
 int Stack::completePlanes() const {
@@ -318,6 +447,8 @@ bool acquireStack(const Scene& scene, const Microscope& m, Stack& stack, const A
     const size_t total = stack.done.size();
     size_t finished = 0;
     for (bool d : stack.done) finished += d;
+    // Each channel's PSF and computed-part model, built for its first plane and reused for the others.
+    std::vector<std::optional<ChannelImaging>> imaging(stack.channels.size());
     for (int k = 0; k < stack.planes; ++k)
         for (size_t slot = 0; slot < stack.channels.size(); ++slot) {
             if (stack.done[stack.index(slot, k)]) continue;
@@ -325,7 +456,8 @@ bool acquireStack(const Scene& scene, const Microscope& m, Stack& stack, const A
             o.progress = [&](double f) {
                 if (cb.progress) cb.progress((double(finished) + f) / double(total));
             };
-            const PlaneImage image = acquirePlane(scene, m, stack.channels[slot], k, o);
+            if (!imaging[slot]) imaging[slot] = setUpChannelImaging(scene, m, stack.channels[slot], options);
+            const PlaneImage image = acquirePlane(scene, m, stack.channels[slot], k, o, &*imaging[slot]);
             if (!image.complete) return false;
             storePlane(stack, m, slot, k, image, options.seed);
             ++finished;

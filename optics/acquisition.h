@@ -1,13 +1,17 @@
 #pragma once
 // A simulated light-sheet acquisition: an objective focused on the sheet, an emission filter and a
-// camera. Camera paths start at the focal plane point of each pixel (object-space pixel = pitch /
-// magnification), in a direction drawn uniformly from the collection cone (half-angle asin(NA/n)),
-// and are traced from the objective side (working distance) through the sample, so defocus and the
-// collection cone are geometric and physical. The mean radiance becomes expected photoelectrons
-// through the real étendue (object pixel area × ∫cone cosθ dω), the exposure, the filter and the QE:
-//     e = t · A · ∫cone cosθ ∫ L(λ) T(λ) QE(λ) λ/(hc) dλ dω.
-// The in-focus diffraction PSF (Airy, optics/psf.h) displaces each path's focal-plane point; defocus
-// stays geometric, so it is not counted twice (docs/optics.md).
+// camera. Every estimator images through one operator (optics/imaging.h): object pixels of pitch /
+// magnification, the collection cone (half-angle asin(NA/n)), the 3-D diffraction PSF and the real
+// étendue, so that mean radiance becomes expected photoelectrons through the exposure, the filter and
+// the QE:  e = t · A · ∫cone cosθ ∫ L(λ) T(λ) QE(λ) λ/(hc) dλ dω.
+//
+// Estimators (docs/model.md, "The computed image"):
+//  - Split (the default): the unscattered image (fluorescence excited by the beams' unscattered light in
+//    their cores, reaching the objective unscattered) is computed by quadrature (optics/unscattered_image.h,
+//    no variance), and camera paths estimate the rest, leaving that part out.
+//  - Path: camera paths estimate everything (the reference).
+// Camera paths start at a point of the pixel displaced by the in-focus PSF, cross the focal plane from
+// a direction of the cone and are weighted at their first vertex so that they image through the 3-D PSF.
 //
 // Layers: renderPlane renders one image for given lights and focal plane; acquirePlane does it for a
 // microscope's channel and plane; acquireStack runs the z-stack (plane-major, so an interrupted run
@@ -19,22 +23,27 @@
 #include <string>
 #include <vector>
 
+#include "optics/imaging.h"
 #include "optics/microscope.h"
+#include "optics/unscattered_image.h"
 #include "render/path_tracer.h"
 
 namespace fluorosim::optics {
 
-// Path: every sample is a full path (the reference). Split: the unscattered light of the beams' cores
-// (render/direct_beam.h) gets its own low-variance samples, and paths estimate the rest.
+// Path: every sample is a full path (the reference). Split: the unscattered image is computed and paths
+// estimate the rest.
 enum class Estimator { Path, Split };
 const char* estimatorName(Estimator e);
 std::optional<Estimator> estimatorFromName(const std::string& name);
 
 struct AcquireOptions {
     Estimator estimator = Estimator::Split;
-    int spp = 16;          // path samples per pixel
-    int directSpp = 64;    // samples of the direct part per pixel (split estimator)
-    int directPicks = 16;  // transmittance estimates per pixel for the direct part
+    int spp = 16;                    // path samples per pixel
+    UnscatteredOptions unscattered;  // the quadrature of the computed part (split)
+    // Light imaged through a first vertex far from focus (its image a disc of radius ρ pixels) is pooled
+    // over blocks of 2^k pixels with 2^k <= poolingFraction × ρ; 0 images everything per pixel.
+    double poolingFraction = 0.25;
+    PsfTableOptions psf;             // the PSF's cut and table resolution
     // Adaptive sampling to a noise target: each pixel traces as many paths (spp at least, maxSpp at
     // most) as bring its Monte Carlo standard error to `noiseRatio` times the camera's noise of its
     // expected signal, √(signal + dark + read²). The number is decided from `pilotSpp` separate pilot
@@ -43,44 +52,60 @@ struct AcquireOptions {
     int maxSpp = 4096;
     int pilotSpp = 16;
     uint64_t seed = 1;
-    int threads = 0;          // 0: all cores
-    bool diffraction = true;  // the Airy PSF; off gives the geometric image
+    int threads = 0;  // 0: all cores
     std::function<void(double)> progress;          // fraction of the current plane, from one thread at a time
     const std::atomic<bool>* cancel = nullptr;     // checked between rows; a cancelled plane is incomplete
-    void validate() const;                         // ConfigError for spp < 1, negative threads
+    void validate() const;                         // ConfigError naming the option and value
 };
 
 struct PlaneImage {
     int width = 0, height = 0;
     std::vector<double> electrons;  // expected photoelectrons per pixel (signal only, no dark current), row-major from the top
-    std::vector<double> stderrElectrons;
+    std::vector<double> stderrElectrons;  // Monte Carlo standard error (the computed part has none)
     PathStats stats;
     double seconds = 0;
-    double largestSample = 0;  // a diagnostic of heavy tails: the largest single path's electrons
-    bool complete = true;      // false when cancelled before every row was done
-    // Split estimator: the direct part and the paths' part, summed over pixels, and each part's
-    // standard error per pixel (diagnostics: which part needs the samples).
-    double directElectrons = 0, pathElectrons = 0;
-    std::vector<double> directStderr, pathStderr;
-    double directSeconds = 0, pathSeconds = 0;  // thread time spent on each part
+    bool complete = true;  // false when cancelled before every row was done
+    // Split estimator: the computed part and the paths' part, summed over pixels, and the time of each.
+    double computedElectrons = 0, pathElectrons = 0;
+    double pooledElectrons = 0;  // of the paths' part, what was pooled over pixel blocks (far from focus)
+    double computedSeconds = 0, pathSeconds = 0;  // wall time of the computed part, thread time of the paths
+    uint64_t computedPoints = 0;                  // emission points of the computed part's quadrature
     // Paths traced for the estimate and for adaptive sampling's pilots (0 without a noise target).
     uint64_t pathSamples = 0, pilotSamples = 0;
+    // Heavy tails: the largest single path's electrons, the largest ratio of a pixel's largest path
+    // sample to its value, and samples dropped for not being finite.
+    double largestSample = 0, largestSampleOverPixel = 0;
+    uint64_t nonFiniteSamples = 0;
 };
 
 // Random streams of a plane, keyed by the channel's name (not its position in a filtered list) and
 // the plane's index, so that acquiring one channel alone reproduces the full acquisition.
 uint64_t planeStreamKey(const std::string& channelName, int plane);
 
-// Expected photoelectrons of one image with the given lights, focal plane, filter and detector.
+// What the planes of one channel share: the PSF (pupil apodised at the stack's central plane) and the
+// computed part's model (built only for the split estimator, and null when nothing is computed).
+struct ChannelImaging {
+    std::shared_ptr<const WidefieldPsf> psf;
+    std::shared_ptr<const UnscatteredModel> unscattered;
+};
+// Builds it for lights and a focal plane (any plane of the stack; the central one is used by acquireStack).
+ChannelImaging setUpChannelImaging(const Scene& scene, const std::vector<Light>& lights, const ObjectiveOptions& objective, const FocalPlane& focus,
+                                   const Filter& emission, const DetectorOptions& detector, int width, int height, const AcquireOptions& options);
+
+// Expected photoelectrons of one image with the given lights, focal plane, filter and detector. Without
+// `channel`, the PSF and the computed part's model are built for this plane alone.
 PlaneImage renderPlane(const Scene& scene, std::vector<Light> lights, const ObjectiveOptions& objective, const FocalPlane& focus,
                        const Filter& emission, const DetectorOptions& detector, int width, int height, uint64_t streamKey,
-                       const AcquireOptions& options);
+                       const AcquireOptions& options, const ChannelImaging* channel = nullptr);
 // The same with the scene's own lights, which may include emitting shapes (tests, benchmarks).
 PlaneImage renderPlane(const Scene& scene, const ObjectiveOptions& objective, const FocalPlane& focus, const Filter& emission,
                        const DetectorOptions& detector, int width, int height, const AcquireOptions& options);
 
+// The channel's shared imaging for a microscope (its lights and focal plane at the stack's centre).
+ChannelImaging setUpChannelImaging(const Scene& scene, const Microscope& microscope, size_t channel, const AcquireOptions& options);
 // Plane `plane` of channel `channel`: the channel's lights moved with the focal plane.
-PlaneImage acquirePlane(const Scene& scene, const Microscope& microscope, size_t channel, int plane, const AcquireOptions& options);
+PlaneImage acquirePlane(const Scene& scene, const Microscope& microscope, size_t channel, int plane, const AcquireOptions& options,
+                        const ChannelImaging* imaging = nullptr);
 
 // A z-stack in memory, channel-major (CZYX), as written to OME-TIFF.
 struct Stack {

@@ -143,9 +143,10 @@ public:
     Vec3 direction(int side) const override;
     double irradiance(const Vec3& p, int side, double lambdaNm) const override;
     const Spectrum& spectrum() const override { return spectrum_; }
-    // Core: |z| <= kCoreWidths w(x), where the irradiance is at least e^-32 of the peak at that x.
+    // Core: |z| <= kCoreWidths w(x), where the irradiance is at least e^-12.5 (3.7e-6) of the peak at that x
+    // and which holds all but 4e-7 of the sheet's power; the computed image leaves the rest to the paths.
     // Along a ray it is a quadric condition in t; the proposal is the Gaussian across the sheet.
-    static constexpr double kCoreWidths = 4;
+    static constexpr double kCoreWidths = 2.5;
     bool inCore(const Vec3& p, int side, double lambdaNm) const override;
     BeamCore coreAlong(const Ray& ray, int side, double lambdaNm) const override;
 

@@ -105,7 +105,9 @@ py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, con
     request.seed = seed;
     request.threads = threads;
     request.estimator = estimator;
-    request.directSpp = directSpp;
+    if (directSpp)
+        throw ConfigError("direct_spp: removed: the split estimator now computes the unscattered image (no samples); spp sets the paths for "
+                          "the scattered light");
     request.noiseRatio = noiseRatio;
     request.maxSpp = maxSpp;
     app::checkAcquireRequest(request);

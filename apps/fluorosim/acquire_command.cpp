@@ -48,8 +48,8 @@ std::string fingerprint(const AcquireArgs& a, const optics::Microscope& m, const
     nlohmann::json channels = nlohmann::json::array();
     for (size_t c : stack.channels) channels.push_back(m.channels[c].name);
     const nlohmann::json j = {{"scene_fnv1a", h}, {"seed", o.seed}, {"spp", o.spp}, {"planes", m.stack.planes}, {"step_mm", m.stack.stepMm},
-                              {"channels", channels}, {"diffraction", o.diffraction}, {"estimator", optics::estimatorName(o.estimator)},
-                              {"direct_spp", o.directSpp}, {"noise_ratio", o.noiseRatio.value_or(0.0)},
+                              {"channels", channels}, {"estimator", optics::estimatorName(o.estimator)},
+                              {"noise_ratio", o.noiseRatio.value_or(0.0)},
                               {"max_spp", o.noiseRatio ? o.maxSpp : 0}};
     return j.dump();
 }
@@ -103,35 +103,35 @@ void runAcquire(const AcquireArgs& a) {
     optics::StackCallbacks cb;
     cb.progress = [&](double f) { bar.update(f); };
     PathStats stats;
-    double seconds = 0, largest = 0, directSum = 0, pathSum = 0, directSeconds = 0, pathSeconds = 0;
-    std::vector<double> directRel, pathRel;  // relative standard errors of each part over the brightest pixels
-    std::vector<double> mcOverCamera;         // MC variance over the camera's noise variance, brightest pixels
-    uint64_t pathSamples = 0, pilotSamples = 0, pixels = 0;
+    double seconds = 0, largest = 0, largestOverPixel = 0, computedSum = 0, pathSum = 0, pooledSum = 0, computedSeconds = 0, pathSeconds = 0;
+    std::vector<double> pathRel;       // relative standard errors over the brightest pixels
+    std::vector<double> mcOverCamera;  // MC variance over the camera's noise variance, brightest pixels
+    uint64_t pathSamples = 0, pilotSamples = 0, pixels = 0, computedPoints = 0, nonFinite = 0;
     const double darkElectrons = m.detector.darkCurrentElectronsPerS * m.detector.exposureS;
     cb.planeDone = [&](size_t slot, int plane, const optics::PlaneImage& image) {
         checkpoint->append(slot, plane, image);
         stats.add(image.stats);
         seconds += image.seconds;
         largest = std::max(largest, image.largestSample);
-        directSum += image.directElectrons;
+        largestOverPixel = std::max(largestOverPixel, image.largestSampleOverPixel);
+        computedSum += image.computedElectrons;
         pathSum += image.pathElectrons;
-        directSeconds += image.directSeconds;
+        pooledSum += image.pooledElectrons;
+        computedSeconds += image.computedSeconds;
         pathSeconds += image.pathSeconds;
+        computedPoints += image.computedPoints;
+        nonFinite += image.nonFiniteSamples;
         pathSamples += image.pathSamples;
         pilotSamples += image.pilotSamples;
         pixels += image.electrons.size();
         std::vector<double> sorted = image.electrons;
         std::sort(sorted.begin(), sorted.end());
         const double cut = sorted[static_cast<size_t>(0.9 * (sorted.size() - 1))];
-        const bool parts = image.directStderr.size() == image.electrons.size() && image.pathStderr.size() == image.electrons.size();
         for (size_t i = 0; i < image.electrons.size(); ++i)
-            if (image.electrons[i] >= cut)
+            if (image.electrons[i] >= cut) {
                 mcOverCamera.push_back(sqr(image.stderrElectrons[i]) /
                                        (std::max(0.0, image.electrons[i]) + darkElectrons + sqr(m.detector.readNoiseElectrons)));
-        for (size_t i = 0; parts && i < image.electrons.size(); ++i)
-            if (image.electrons[i] >= cut && image.electrons[i] > 0) {
-                directRel.push_back(image.directStderr[i] / image.electrons[i]);
-                pathRel.push_back(image.pathStderr[i] / image.electrons[i]);
+                if (image.electrons[i] > 0) pathRel.push_back(image.stderrElectrons[i] / image.electrons[i]);
             }
         double signal = 0;
         for (double e : image.electrons) signal += e;
@@ -175,12 +175,14 @@ void runAcquire(const AcquireArgs& a) {
                                     {"z_step_um", m.stack.stepMm * 1e3},
                                     {"spp", o.spp},
                                     {"estimator", optics::estimatorName(o.estimator)},
-                                    {"direct_spp", o.estimator == optics::Estimator::Split ? o.directSpp : 0},
-                                    {"direct_electrons_fraction", directSum / std::max(1e-300, directSum + pathSum)},
-                                    {"direct_thread_seconds", directSeconds},
+                                    {"computed_electrons_fraction", computedSum / std::max(1e-300, computedSum + pathSum)},
+                                    {"pooled_electrons_fraction", pooledSum / std::max(1e-300, computedSum + pathSum)},
+                                    {"computed_seconds", computedSeconds},
+                                    {"computed_points", computedPoints},
                                     {"path_thread_seconds", pathSeconds},
-                                    {"median_direct_relative_stderr_top10", median(directRel)},
-                                    {"median_path_relative_stderr_top10", median(pathRel)},
+                                    {"median_relative_stderr_top10", median(pathRel)},
+                                    {"non_finite_samples", nonFinite},
+                                    {"largest_sample_over_pixel", largestOverPixel},
                                     {"noise_ratio_target", o.noiseRatio ? nlohmann::json(*o.noiseRatio) : nlohmann::json(nullptr)},
                                     // The standard errors' own estimate (heavy tails make it optimistic;
                                     // scripts/noise-vs-time.sh measures with two seeds).
@@ -220,9 +222,13 @@ void addAcquireCommand(CLI::App& app) {
     cmd->add_option("--step", a->step, "Distance between planes with a unit, e.g. 2um");
     cmd->add_option("--spp", a->spp, "Path samples per pixel");
     cmd->add_option("--estimator", a->estimator,
-                    "split (default: the unscattered light of the sheets by its own low-variance estimator, paths for the rest) or "
-                    "path (every sample a full path: the reference)");
-    cmd->add_option("--direct-spp", a->directSpp, "Samples per pixel of the direct part (split estimator; default 64)");
+                    "split (default: the unscattered image computed, paths for the scattered light) or path (every sample a full path: "
+                    "the reference)");
+    // Removed with the sampled direct part; refused with a message rather than CLI11's generic one.
+    cmd->add_option_function<std::string>("--direct-spp", [](const std::string&) {
+           throw ConfigError("--direct-spp: removed: the split estimator now computes the unscattered image (no samples); "
+                             "--spp sets the paths for the scattered light");
+       })->group("");
     cmd->add_option("--noise-ratio", a->noiseRatio,
                     "Adaptive sampling: paths per pixel (--spp at least) until the Monte Carlo standard error is at most this times the "
                     "camera's noise of the expected signal, sqrt(signal + dark + read^2), decided from separate pilot paths");

@@ -17,7 +17,7 @@
 namespace fluorosim::app {
 
 struct AcquireRequest {
-    std::optional<int> planes, spp, directSpp, maxSpp;
+    std::optional<int> planes, spp, maxSpp;
     std::optional<double> noiseRatio;
     std::string estimator = "split";
     std::optional<std::string> step;
@@ -51,11 +51,6 @@ inline optics::AcquireOptions applyAcquireRequest(const AcquireRequest& a, const
     const auto estimator = optics::estimatorFromName(a.estimator);
     if (!estimator) throw ConfigError("--estimator: expected \"split\" or \"path\", got \"" + a.estimator + "\"");
     o.estimator = *estimator;
-    if (a.directSpp) {
-        if (*a.directSpp < 1 || *a.directSpp > (1 << 24))
-            throw ConfigError("--direct-spp: must lie in [1, 16777216], got " + std::to_string(*a.directSpp));
-        o.directSpp = *a.directSpp;
-    }
     if (a.noiseRatio) {
         if (!(*a.noiseRatio > 0) || !std::isfinite(*a.noiseRatio))
             throw ConfigError("--noise-ratio: must be positive and finite, got " + std::to_string(*a.noiseRatio));

@@ -1,6 +1,8 @@
 #include "distributed_acquire.h"
 
 #include <cstring>
+#include <map>
+#include <mutex>
 #include <string_view>
 #include <type_traits>
 
@@ -16,26 +18,26 @@ size_t taskChannel(uint64_t task) { return static_cast<size_t>(task >> 32); }
 int taskPlane(uint64_t task) { return static_cast<int>(task & 0xffffffffu); }
 
 // A plane image as bytes between ranks of the same binary: a fixed header, then the per-pixel arrays
-// (electrons, their standard errors, and the split estimator's per-part standard errors) as doubles,
-// so the root stores and summarises exactly what a single process would.
+// (electrons and their standard errors) as doubles, so the root stores and summarises exactly what a
+// single process would.
 struct PlaneHeader {
     int32_t width, height;
     uint8_t complete;
-    double seconds, largestSample;
-    double directElectrons, pathElectrons, directSeconds, pathSeconds;
-    uint64_t pathSamples, pilotSamples;
+    double seconds, largestSample, largestSampleOverPixel;
+    double computedElectrons, pathElectrons, pooledElectrons, computedSeconds, pathSeconds;
+    uint64_t computedPoints, pathSamples, pilotSamples, nonFiniteSamples;
     PathStats stats;
 };
 static_assert(std::is_trivially_copyable_v<PlaneHeader>);
 
-constexpr size_t kPlaneArrays = 4;
-std::vector<double> optics::PlaneImage::*const kArrays[kPlaneArrays] = {&optics::PlaneImage::electrons, &optics::PlaneImage::stderrElectrons,
-                                                                        &optics::PlaneImage::directStderr, &optics::PlaneImage::pathStderr};
+constexpr size_t kPlaneArrays = 2;
+std::vector<double> optics::PlaneImage::*const kArrays[kPlaneArrays] = {&optics::PlaneImage::electrons, &optics::PlaneImage::stderrElectrons};
 
 std::string encodePlane(const optics::PlaneImage& image) {
-    const PlaneHeader h{image.width,           image.height,         image.complete,      image.seconds, image.largestSample,
-                        image.directElectrons, image.pathElectrons, image.directSeconds, image.pathSeconds,
-                        image.pathSamples,     image.pilotSamples,  image.stats};
+    const PlaneHeader h{image.width,          image.height,        image.complete,         image.seconds,
+                        image.largestSample,  image.largestSampleOverPixel,               image.computedElectrons,
+                        image.pathElectrons,  image.pooledElectrons, image.computedSeconds, image.pathSeconds,   image.computedPoints,
+                        image.pathSamples,    image.pilotSamples,  image.nonFiniteSamples, image.stats};
     const size_t pixels = image.electrons.size();
     std::string bytes(sizeof h + kPlaneArrays * pixels * sizeof(double), '\0');
     std::memcpy(bytes.data(), &h, sizeof h);
@@ -58,12 +60,16 @@ optics::PlaneImage decodePlane(std::string_view bytes) {
     image.complete = h.complete != 0;
     image.seconds = h.seconds;
     image.largestSample = h.largestSample;
-    image.directElectrons = h.directElectrons;
+    image.largestSampleOverPixel = h.largestSampleOverPixel;
+    image.computedElectrons = h.computedElectrons;
     image.pathElectrons = h.pathElectrons;
-    image.directSeconds = h.directSeconds;
+    image.pooledElectrons = h.pooledElectrons;
+    image.computedSeconds = h.computedSeconds;
     image.pathSeconds = h.pathSeconds;
+    image.computedPoints = h.computedPoints;
     image.pathSamples = h.pathSamples;
     image.pilotSamples = h.pilotSamples;
+    image.nonFiniteSamples = h.nonFiniteSamples;
     image.stats = h.stats;
     for (size_t k = 0; k < kPlaneArrays; ++k) {
         std::vector<double>& v = image.*kArrays[k];
@@ -83,8 +89,24 @@ optics::AcquireOptions rankOptions(const optics::AcquireOptions& options, const 
     return o;
 }
 
-std::string renderTask(const Scene& scene, const optics::Microscope& m, const optics::AcquireOptions& o, uint64_t task) {
-    return encodePlane(optics::acquirePlane(scene, m, taskChannel(task), taskPlane(task), o));
+// Each rank builds a channel's PSF and computed-part model for its first plane of that channel and
+// reuses them for the rest.
+class RankImaging {
+public:
+    const optics::ChannelImaging& at(const Scene& scene, const optics::Microscope& m, size_t channel, const optics::AcquireOptions& o) {
+        const std::lock_guard<std::mutex> lock(mutex_);
+        auto it = channels_.find(channel);
+        if (it == channels_.end()) it = channels_.emplace(channel, optics::setUpChannelImaging(scene, m, channel, o)).first;
+        return it->second;
+    }
+
+private:
+    std::mutex mutex_;
+    std::map<size_t, optics::ChannelImaging> channels_;
+};
+
+std::string renderTask(const Scene& scene, const optics::Microscope& m, const optics::AcquireOptions& o, RankImaging& imaging, uint64_t task) {
+    return encodePlane(optics::acquirePlane(scene, m, taskChannel(task), taskPlane(task), o, &imaging.at(scene, m, taskChannel(task), o)));
 }
 
 }  // namespace
@@ -101,7 +123,8 @@ bool acquireStackOnCluster(const Scene& scene, const optics::Microscope& m, opti
     size_t finished = 0;
     for (bool d : stack.done) finished += d;
     cluster::TaskFarm farm;
-    farm.run = [&](uint64_t task) { return renderTask(scene, m, o, task); };
+    RankImaging imaging;
+    farm.run = [&](uint64_t task) { return renderTask(scene, m, o, imaging, task); };
     farm.stopRequested = [&] { return options.cancel && options.cancel->load(); };
     farm.cancelLocal = &cancelLocal;
     farm.collect = [&](uint64_t task, const std::string& bytes) {
@@ -121,7 +144,8 @@ bool acquireStackOnCluster(const Scene& scene, const optics::Microscope& m, opti
 
 void servePlanes(const Scene& scene, const optics::Microscope& m, const optics::AcquireOptions& options) {
     const optics::AcquireOptions o = rankOptions(options, options.cancel);
-    cluster::serveTaskFarms([&](uint64_t task) { return renderTask(scene, m, o, task); });
+    RankImaging imaging;
+    cluster::serveTaskFarms([&](uint64_t task) { return renderTask(scene, m, o, imaging, task); });
 }
 
 }  // namespace fluorosim::app

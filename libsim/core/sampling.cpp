@@ -86,4 +86,16 @@ double sampleTruncatedNormal(double u, double mean, double sigma, double lo, dou
     return t;
 }
 
+double truncatedNormalPdf(double t, double mean, double sigma, double lo, double hi) {
+    if (!(t >= lo && t <= hi)) return 0.0;
+    if (!std::isfinite(sigma) || !(sigma > 0) || hi - lo < 0.2 * sigma) return 1.0 / (hi - lo);
+    const double a = (lo - mean) / sigma, b = (hi - mean) / sigma;
+    const bool upper = a > 0;
+    const double qa = 0.5 * std::erfc((upper ? a : -a) / std::sqrt(2.0)), qb = 0.5 * std::erfc((upper ? b : -b) / std::sqrt(2.0));
+    const double mass = upper ? qa - qb : qb - qa;
+    if (!(mass > 1e-280) || !std::isfinite(mass)) return 1.0 / (hi - lo);
+    const double z = (t - mean) / sigma;
+    return std::exp(-0.5 * z * z) / (std::sqrt(2 * kPi) * sigma * mass);
+}
+
 }  // namespace fluorosim

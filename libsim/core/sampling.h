@@ -50,5 +50,7 @@ int sampleDiscrete(std::span<const double> weights, double u, double* pmf = null
 // infinite, when the interval is short against sigma, or when it lies so far in a tail that the
 // normal's mass there underflows.
 double sampleTruncatedNormal(double u, double mean, double sigma, double lo, double hi, double* pdf);
+// The density sampleTruncatedNormal samples with, at t (0 outside [lo, hi]).
+double truncatedNormalPdf(double t, double mean, double sigma, double lo, double hi);
 
 }  // namespace fluorosim

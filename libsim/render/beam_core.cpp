@@ -1,6 +1,9 @@
 #include "render/beam_core.h"
 
-#include <limits>
+#include <algorithm>
+#include <cmath>
+
+#include "core/sampling.h"
 
 namespace fluorosim {
 
@@ -13,25 +16,44 @@ std::vector<BeamLine> beamLines(const std::vector<Light>& lights) {
     return lines;
 }
 
-int straightSegments(const Scene& scene, const Ray& ray, int medium, double tMin, std::array<RaySegment, kMaxRaySegments>& out) {
-    int count = 0;
-    Ray r = ray;
-    double tBase = 0;
-    int current = medium;
-    for (int crossings = 0; crossings < 1000 && count < kMaxRaySegments; ++crossings) {
-        const auto hit = scene.geometry.intersect(r, tMin, std::numeric_limits<double>::infinity());
-        const double t1 = hit ? tBase + hit->t : std::numeric_limits<double>::infinity();
-        if (current != kNone && !scene.media[static_cast<size_t>(current)].isVacuumLike()) out[static_cast<size_t>(count++)] = {tBase, t1, current};
-        if (!hit) break;
-        const ShapeInfo& s = scene.shapes[hit->shape];
-        if (!(s.isInterface && s.material == kNone)) break;
-        current = dot(r.d, hit->n) < 0 ? s.insideMedium : s.outsideMedium;
-        r.o = hit->p;
-        tBase = t1;
-        // Rays leave a surface from on it and skip it with tMin (as the path tracer does).
-        tMin = hit->epsilon / std::max(std::abs(dot(hit->n, r.d)), 1e-2);
+BeamCore coreAhead(const BeamProfile& profile, const Ray& ray, int side, double lambdaNm) {
+    BeamCore core = profile.coreAlong(ray, side, lambdaNm);
+    BeamCore ahead;
+    for (int k = 0; k < core.count; ++k) {
+        BeamCoreInterval piece = core.intervals[static_cast<size_t>(k)];
+        piece.tMin = std::max(piece.tMin, 0.0);
+        if (piece.tMax > piece.tMin) ahead.intervals[static_cast<size_t>(ahead.count++)] = piece;
     }
-    return count;
+    return ahead;
+}
+
+namespace {
+double uniformShare(const BeamCoreInterval& piece) { return std::isfinite(piece.tMax - piece.tMin) ? kUniformCoreShare : 0.0; }
+}  // namespace
+
+double sampleCorePoint(double u, const BeamCoreInterval& piece, double* pdf) {
+    const double share = uniformShare(piece);
+    double t = 0;
+    if (u < share) {
+        t = piece.tMin + (u / share) * (piece.tMax - piece.tMin);
+    } else {
+        if (!std::isfinite(piece.sigma) && !std::isfinite(piece.tMax - piece.tMin)) {
+            *pdf = 0;
+            return piece.tMin;
+        }
+        double normalPdf = 0;
+        t = sampleTruncatedNormal((u - share) / (1 - share), piece.centre, piece.sigma, piece.tMin, piece.tMax, &normalPdf);
+    }
+    *pdf = corePointPdf(t, piece);
+    return t;
+}
+
+double corePointPdf(double t, const BeamCoreInterval& piece) {
+    if (!(t >= piece.tMin && t <= piece.tMax)) return 0.0;
+    const double share = uniformShare(piece);
+    if (share == 0 && !std::isfinite(piece.sigma)) return 0.0;
+    const double normal = truncatedNormalPdf(t, piece.centre, piece.sigma, piece.tMin, piece.tMax);
+    return (1 - share) * normal + (share > 0 ? share / (piece.tMax - piece.tMin) : 0.0);
 }
 
 }  // namespace fluorosim

@@ -1,13 +1,9 @@
 #pragma once
-// Points where a ray crosses the cores of beams (scene/beam.h), shared by the estimators that
-// integrate a beam's unscattered light along rays instead of waiting for a path vertex to land in a
-// thin sheet: the microscope's direct estimator (render/direct_beam.h) and the path tracer's
-// excitation sub-paths. A ray runs straight through null interfaces until the first surface; along
-// each of its media, every core interval gets stratified points from the beam's proposal.
-#include <array>
+// Beams' lines, and points along a ray inside a beam's core, for estimators that integrate a beam's
+// unscattered light along a line instead of waiting for a path vertex to land in a thin sheet (the path
+// tracer's sheet-side sampling of scattered light).
 #include <vector>
 
-#include "media/medium.h"
 #include "scene/scene.h"
 
 namespace fluorosim {
@@ -20,30 +16,17 @@ struct BeamLine {
 // Every spectral line of every beam in `lights`.
 std::vector<BeamLine> beamLines(const std::vector<Light>& lights);
 
-// A straight piece of a ray in one medium (not vacuum-like).
-struct RaySegment {
-    double t0, t1;
-    int medium;
-};
-// The media along `ray` (starting in `medium`, leaving a surface with tMin) up to the first surface
-// that is not a null interface. At most `kMaxRaySegments`.
-inline constexpr int kMaxRaySegments = 16;
-int straightSegments(const Scene& scene, const Ray& ray, int medium, double tMin, std::array<RaySegment, kMaxRaySegments>& out);
-
-struct CorePoint {
-    Vec3 y;
-    double t;
-    int medium, line, side;
-    double weight;  // source per unit length / pdf / points, before transmittances
-};
+// Points inside a piece of a beam's core along a ray come from a defensive mixture: the profile's normal
+// across the beam, and a uniform share over the piece, which bounds the weights where the normal
+// misjudges the profile (a line nearly parallel to a sheet, along which the beam widens). The pieces are
+// the beam's own (coreAhead: coreAlong at t >= 0), not clipped to media, so that a point's density
+// depends on the beam and the ray alone, and another strategy can evaluate it.
 inline constexpr int kPointsPerCore = 8;
-// Appends the core points of line `line` (all sides) along the segments, with weight
-// sourcePerChannel(medium, side) · channels(y) · E(y) / pdf / kPointsPerCore, E the line's irradiance
-// in W/m². `uPoints` shifts the stratified points. Returns the sum of the weights added.
-template <class SourcePerChannel>
-double addCorePoints(const Scene& scene, const BeamLine& beam, int line, const Ray& ray, const RaySegment* segments, int count,
-                     double uPoints, SourcePerChannel&& sourcePerChannel, std::vector<CorePoint>& out);
+inline constexpr double kUniformCoreShare = 0.25;
+BeamCore coreAhead(const BeamProfile& profile, const Ray& ray, int side, double lambdaNm);
+// A point of `piece` from u in [0, 1), and its density; 0 for a piece no density covers (unbounded and
+// uniform across).
+double sampleCorePoint(double u, const BeamCoreInterval& piece, double* pdf);
+double corePointPdf(double t, const BeamCoreInterval& piece);
 
 }  // namespace fluorosim
-
-#include "render/beam_core_impl.h"

@@ -8,6 +8,8 @@
 #include "core/math.h"
 #include "core/sampling.h"
 #include "media/free_flight.h"
+#include "render/beam_core.h"
+#include "render/straight_line.h"
 
 namespace fluorosim {
 namespace {
@@ -17,27 +19,40 @@ namespace {
 // sliver of medium (measured: 20 nm of a 1 µm dye layer, a 2 % loss) at every crossing.
 double leavingTMin(const Vec3& n, const Vec3& dir, double eps) { return eps / std::max(std::abs(dot(n, dir)), 1e-2); }
 
+// Where scattered emission hands over from branches to connections (emissionMis).
+constexpr double kEmissionMisDistanceMm = 0.004;
+
+// Balance heuristic between the sheet-side strategy (density a per point) and phase sampling (b).
+double sheetMis(double a, double b) { return a + b > 0 ? a / (a + b) : 0.0; }
+
 SampledSpectrum clampZero(const SampledSpectrum& s) {
     SampledSpectrum r;
     for (int i = 0; i < kNumWavelengths; ++i) r[i] = std::max(0.0, s[i]);
     return r;
 }
 
-// Whether the direct estimator (render/direct_beam.h) covers this light sample at p: a beam at one of
-// its spectral lines (not a continuous beam spectrum), connected from inside the beam's core.
-bool coveredByDirectPart(const LightSample& ls, const Vec3& p, const SampledWavelengths& wl) {
-    return ls.beam && wl.discrete && ls.beamProfile->inCore(p, ls.side, wl.lambda[0]);
+// Whether the camera's imaging computes this light sample's contribution at p itself: a beam at one of
+// its spectral lines (not a continuous beam spectrum), connected from inside the beam's core, where the
+// imaging computes the unscattered image (CameraPathImaging).
+bool computedByImaging(const LightSample& ls, const Vec3& p, const SampledWavelengths& wl, const CameraPathImaging* imaging) {
+    return imaging && ls.beam && wl.discrete && ls.beamProfile->inCore(p, ls.side, wl.lambda[0]) && imaging->computesUnscatteredAt(p);
 }
 
 }  // namespace
 
+namespace {
+bool anyBeam(const std::vector<Light>& lights) {
+    return std::any_of(lights.begin(), lights.end(), [](const Light& l) { return std::holds_alternative<BeamLight>(l); });
+}
+}  // namespace
+
 PathTracer::PathTracer(const Scene& scene)
     : scene_(scene), lightList_(scene.lights), lights_(scene, lightList_),
-      fluorescence_(scene, lightList_) {}
+      fluorescence_(scene, lightList_), hasBeams_(anyBeam(lightList_)) {}
 
 PathTracer::PathTracer(const Scene& scene, std::vector<Light> lights)
     : scene_(scene), lightList_(std::move(lights)), lights_(scene, lightList_),
-      fluorescence_(scene, lightList_) {
+      fluorescence_(scene, lightList_), hasBeams_(anyBeam(lightList_)) {
     const auto isArea = [](const Light& l) { return std::holds_alternative<AreaLight>(l); };
     if (std::any_of(scene.lights.begin(), scene.lights.end(), isArea) || std::any_of(lightList_.begin(), lightList_.end(), isArea))
         throw ConfigError("a separate light list cannot be used with emitting shapes (their lights are indexed by shape)");
@@ -177,10 +192,25 @@ struct PathTracer::PathState {
     Vec3 prevScatter;
     int generation = 0;             // fluorescence events before this path
     bool startsAtEmission = false;  // ray.o is a re-emission point with an isotropic direction still to choose
-    // Beam cores estimated separately (PathStart::directBeamsSeparate): on a camera path's first
-    // straight segment, and at the first vertex of a sub-path branched from it.
-    bool directCameraSegment = false;
-    bool skipBeamCoresAtStart = false;
+    // The camera's imaging (PathStart::imaging) weighs the first vertex of a camera path and computes
+    // the unscattered image of beam cores on its first straight segment, which sub-paths branched there
+    // leave out at their first vertex.
+    const CameraPathImaging* imaging = nullptr;
+    bool firstSegment = false;
+    StartBeamWeight startBeam;  // of a sub-path's first vertex
+    // The sheet-side strategy ran at the last medium vertex (prevScatter): the phase pdf of the direction
+    // the path then took and the proposal's asymmetry there, for the MIS weight of a beam connection
+    // at the next vertex (sheetScattering).
+    bool sheetSampledAtLastVertex = false;
+    double lastPhasePdf = 0, lastProposalG = 0, lastFloorExtinction = 0;
+    // A camera path connected to the computed emission at its last medium vertex (emissionConnection):
+    // the branch points of the next free flight weigh the same light by the complement.
+    bool emissionSampledAtLastVertex = false;
+    // The image level of the first vertex (CameraPathImaging::imageLevel), and what branches on the
+    // first segment contributed, by their own levels.
+    int level = 0;
+    SampledSpectrum firstSegmentTotal;
+    std::array<SampledSpectrum, kImageLevels> firstSegmentPooled{};
     double tMin = 0;                // > 0 when ray.o lies on the surface the ray leaves
 };
 
@@ -192,7 +222,8 @@ PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths&
     state.medium = medium;
     state.beta = start.beta;
     state.r_u = start.r_u;
-    state.directCameraSegment = start.directBeamsSeparate;
+    state.imaging = start.imaging;
+    state.firstSegment = true;
     state.prevScatter = ray.o;
     return trace(state, wl, rng, stats);
 }
@@ -203,7 +234,7 @@ PathRadiance PathTracer::meanRadiance(const Vec3& p, int medium, const SampledWa
 }
 
 PathRadiance PathTracer::traceFromEmission(const Vec3& p, int medium, const SampledWavelengths& wl, const SampledSpectrum& beta, int depth,
-                                           int generation, Rng& rng, PathStats& stats, bool skipBeamCores) const {
+                                           int generation, Rng& rng, PathStats& stats, StartBeamWeight startBeam) const {
     PathState state;
     state.ray = Ray{p, Vec3(0, 0, 1)};
     state.medium = medium;
@@ -212,13 +243,13 @@ PathRadiance PathTracer::traceFromEmission(const Vec3& p, int medium, const Samp
     state.depth = depth;
     state.generation = generation;
     state.startsAtEmission = true;
-    state.skipBeamCoresAtStart = skipBeamCores;
+    state.startBeam = startBeam;
     return trace(state, wl, rng, stats);
 }
 
 SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double* channels, const SampledWavelengths& wl,
                                          const SampledSpectrum& weight, Rng& rng, PathStats& stats, int generation, int depth,
-                                         bool skipBeamCores) const {
+                                         StartBeamWeight startBeam) const {
     // Generations are ended by roulette; this cap only guards the stack and is reported if reached.
     constexpr int kMaxGenerations = 64;
     if (generation >= kMaxGenerations) {
@@ -255,11 +286,12 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double
     SampledSpectrum Lx(0.0);
     if (fluorescence_.model() == FluorescenceModel::Paper) {
         const double uLight = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform();
-        if (const auto ls = lights_.sample(p, uLight, u1, u2, wlx);
-            ls && ls->L && ls->pdf > 0 && !(skipBeamCores && coveredByDirectPart(*ls, p, wlx)))
-            Lx = start * estimateTransmittance(p, ls->p, medium, wlx, rng, nullptr, 0.0, ls->beam, true).T * ls->L * (kInv4Pi / ls->pdf);
+        if (const auto ls = lights_.sample(p, uLight, u1, u2, wlx); ls && ls->L && ls->pdf > 0) {
+            const double w = computedByImaging(*ls, p, wlx, startBeam.imaging) ? startBeam.weight : 1.0;
+            if (w > 0) Lx = start * estimateTransmittance(p, ls->p, medium, wlx, rng, nullptr, 0.0, ls->beam, true).T * ls->L * (w * kInv4Pi / ls->pdf);
+        }
     } else {
-        Lx = traceFromEmission(p, medium, wlx, start, depth, generation + 1, rng, stats, skipBeamCores).total();
+        Lx = traceFromEmission(p, medium, wlx, start, depth, generation + 1, rng, stats, startBeam).total();
     }
     SampledSpectrum result(0.0);
     for (int k = 0; k < kNumWavelengths; ++k) {
@@ -271,6 +303,12 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double
 
 PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const {
     SampledSpectrum L(0.0), Lf(0.0);
+    // Everything after the first vertex is imaged at its level; first-segment branches at their own.
+    auto finish = [&] {
+        PathRadiance r{L, Lf, st.firstSegmentPooled};
+        if (st.imaging && st.level > 0) r.pooled[static_cast<size_t>(st.level)] += L + Lf - st.firstSegmentTotal;
+        return r;
+    };
     SampledSpectrum& beta = st.beta;
     SampledSpectrum& r_u = st.r_u;
     SampledSpectrum& r_l = st.r_l;
@@ -298,11 +336,13 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
     // NEE from a scattering vertex. evalScatter(wi) returns {f * |cos| (or phase value), pdf}.
     // At a surface, `surface` and `n` let the light ray leave through the side of wi (transmission).
     auto directLight = [&](const Vec3& p, int lightMedium, const SampledSpectrum& r_p, auto&& evalScatter,
-                           const Vec3& nOffset, const ShapeInfo* surface, double surfaceEps, bool skipBeamCores) -> SampledSpectrum {
+                           const Vec3& nOffset, const ShapeInfo* surface, double surfaceEps,
+                           StartBeamWeight startBeam) -> SampledSpectrum {
         const double uLight = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform();
         const auto ls = lights_.sample(p, uLight, u1, u2, wl);
         if (!ls || !ls->L || !(ls->pdf > 0)) return SampledSpectrum(0.0);
-        if (skipBeamCores && coveredByDirectPart(*ls, p, wl)) return SampledSpectrum(0.0);
+        const double startWeight = computedByImaging(*ls, p, wl, startBeam.imaging) ? startBeam.weight : 1.0;
+        if (!(startWeight > 0)) return SampledSpectrum(0.0);
         const auto [fHat, scatterPdf] = evalScatter(ls->wi);
         if (!fHat) return SampledSpectrum(0.0);
         int startMedium = lightMedium;
@@ -311,14 +351,167 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             estimateTransmittance(p, ls->p, startMedium, wl, rng, surface ? &nOffset : nullptr, surfaceEps, ls->beam, ls->delta);
         if (!T.T) return SampledSpectrum(0.0);
         const SampledSpectrum rl = T.r_l * r_p * ls->pdf;
-        if (ls->delta) return beta * fHat * T.T * ls->L / rl.average();
+        if (ls->delta) {
+            // A medium vertex inside a beam's core reached by a phase-sampled direction from a vertex
+            // where the sheet-side strategy also ran: the balance heuristic over that direction.
+            double mis = 1;
+            if (!surface && ls->beam && wl.discrete && st.sheetSampledAtLastVertex) {
+                const Vec3 d = p - prevScatter;
+                const double t = length(d);
+                const Vec3 w = d / t;
+                const BeamCore core = coreAhead(*ls->beamProfile, Ray{prevScatter, w}, ls->side, wl.lambda[0]);
+                double pdfPoint = 0;
+                for (int k = 0; k < core.count; ++k) pdfPoint += corePointPdf(t, core.intervals[static_cast<size_t>(k)]);
+                if (pdfPoint > 0) {
+                    const Medium& med = scene_.media[static_cast<size_t>(lightMedium)];
+                    ChannelValues ch;
+                    med.channelValues(p, ch.data());
+                    const double sigmaS = med.scatteringAt(wl.lambda[0]) * ch[kScatteringChannel];
+                    const double pdfSheet = HenyeyGreenstein(st.lastProposalG).pdf(ls->beamProfile->direction(ls->side), -w);
+                    mis = 1 - sheetMis(kPointsPerCore * pdfPoint * pdfSheet, st.lastPhasePdf * sigmaS * std::exp(-st.lastFloorExtinction * t));
+                }
+            }
+            return beta * fHat * T.T * ls->L * (mis * startWeight) / rl.average();
+        }
         const SampledSpectrum ru = T.r_u * r_p * scatterPdf;
         return beta * fHat * T.T * ls->L / (rl + ru).average();
     };
 
-    // A real scattering vertex in a medium: NEE with MIS, then a new direction from the phase function
-    // (sampled exactly, so f / pdf = 1 and beta is unchanged).
-    auto scatterInMedium = [&](const Vec3& p, const HenyeyGreenstein& phase, bool skipBeamCores) {
+    // Sheet-side sampling of the beam light that scattered once in a beam's core on its way to p, for
+    // paths at a beam's line: a direction from the Henyey–Greenstein lobe (asymmetry proposalG) around
+    // the beam's axis, and the core integrated along the line from p in that direction (core points,
+    // one transmittance pick). A phase-sampled path that next scatters inside the core finds the same
+    // light; the balance heuristic weighs both over the direction and the distance t along it: this
+    // strategy's density per point is its points × their density × the lobe's pdf, the phase-sampled
+    // path's the phase pdf × σs × the floor transmittance to t. Phase sampling alone finds this light
+    // with the core's irradiance as weight and the core's thinness as probability (fireflies); this
+    // strategy alone is noisy where the phase lobe at p is narrow and the sheet's is not.
+    auto sheetScattering = [&](const Vec3& p, double proposalG, double floorExtinction, auto&& phasePdf) -> SampledSpectrum {
+        const size_t count = lightList_.size();
+        const double uLight = rng.uniform(), uSide = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform(), uPoints = rng.uniform(),
+                     uPick = rng.uniform();
+        const size_t index = std::min(count - 1, static_cast<size_t>(uLight * static_cast<double>(count)));
+        const BeamLight* beam = std::get_if<BeamLight>(&lightList_[index]);
+        if (!beam) return SampledSpectrum(0.0);
+        const BeamProfile& profile = *beam->profile;
+        const int side = std::min(profile.sides() - 1, static_cast<int>(uSide * profile.sides()));
+        const double power = profile.spectrum().sampleEmission(wl)[0];
+        if (!(power > 0)) return SampledSpectrum(0.0);
+        const Vec3 axis = profile.direction(side);
+        const HenyeyGreenstein proposal(proposalG);
+        double pdfSheet = 0;
+        const Vec3 travel = proposal.sample(axis, u1, u2, &pdfSheet);  // the scattered light's direction, toward p
+        const Vec3 w = -travel;
+        const double f = phasePdf(w);
+        if (!(f > 0) || !(pdfSheet > 0)) return SampledSpectrum(0.0);
+        const Ray line{p, w};
+        const double lambda = wl.lambda[0];
+        const BeamCore core = coreAhead(profile, line, side, lambda);
+        if (core.count == 0) return SampledSpectrum(0.0);
+        const StraightLine straight = traceStraightLine(scene_, line, medium, 0.0, std::numeric_limits<double>::infinity(), LineSurfaces::StopAtAny);
+        // Core points, each weighed against a phase-sampled path scattering there (sheetMis).
+        struct Point {
+            Vec3 y;
+            int medium;
+            double weight;
+        };
+        std::array<Point, 2 * kPointsPerCore> points{};
+        int n = 0;
+        double total = 0;
+        ChannelValues ch;
+        for (int k = 0; k < core.count; ++k)
+            for (int i = 0; i < kPointsPerCore; ++i) {
+                double pdf = 0;
+                const double t = sampleCorePoint((i + uPoints) / kPointsPerCore, core.intervals[static_cast<size_t>(k)], &pdf);
+                if (!(pdf > 0)) continue;
+                const auto seg = std::find_if(straight.segments.begin(), straight.segments.end(),
+                                              [&](const RaySegment& s) { return t >= s.t0 && t < s.t1; });
+                if (seg == straight.segments.end() || seg->medium == kNone) continue;
+                const Medium& med = scene_.media[static_cast<size_t>(seg->medium)];
+                if (med.isVacuumLike()) continue;
+                const Vec3 y = line.at(t);
+                med.channelValues(y, ch.data());
+                const double sigmaS = med.scatteringAt(lambda) * ch[kScatteringChannel];
+                const double E = profile.irradiance(y, side, lambda) * 1e6 * power;
+                const double source = sigmaS * med.phase().pdf(axis, travel) * E;
+                if (!(source > 0)) continue;
+                const double mis = sheetMis(kPointsPerCore * pdf * pdfSheet, f * sigmaS * std::exp(-floorExtinction * t));
+                points[static_cast<size_t>(n++)] = {y, seg->medium, mis * source / (kPointsPerCore * pdf)};
+                total += points[static_cast<size_t>(n - 1)].weight;
+            }
+        if (!(total > 0)) return SampledSpectrum(0.0);
+        // One point, picked in proportion to its weight, carries the transmittances for all.
+        double target = uPick * total, acc = 0;
+        int pick = 0;
+        for (; pick + 1 < n; ++pick) {
+            acc += points[static_cast<size_t>(pick)].weight;
+            if (acc > target) break;
+        }
+        const Point& z = points[static_cast<size_t>(pick)];
+        const SampledSpectrum T = transmittance(p, z.y, medium, wl, rng);
+        if (!T) return SampledSpectrum(0.0);
+        const SampledSpectrum Tb = beamTransmittance(z.y, -axis, z.medium, wl, rng);
+        const double select = 1.0 / (static_cast<double>(count) * profile.sides());
+        return beta * T * Tb * (total * f / (pdfSheet * select)) / r_u.average();
+    };
+    auto sheetLinesAt = [&](const SampledWavelengths& w) { return w.discrete && hasBeams_; };
+
+    // A real scattering vertex in a medium: NEE with MIS, the sheet-side strategy, then a new direction
+    // from the phase function (sampled exactly, so f / pdf = 1 and beta is unchanged). `proposalG` is the
+    // medium's asymmetry (the sheet-side proposal's), which an emission vertex's isotropic phase is not.
+    // Scattered emission: from a camera path's medium vertex, a point of the emission the camera's
+    // imaging computes (drawn by its density), connected through the medium, with the fluorescence its
+    // beams' unscattered light excites there; combined with finding that point by a branch of the next
+    // free flight. The weights split the two by distance, r²/(r² + r0²) to the connection: a branch
+    // commits the whole free flight to one direction, so a flight along a bright neurite gathers
+    // hundreds of branches, while a connection's 1/r² is what makes it noisy near the vertex. Any
+    // weights that sum to one keep the estimate unbiased.
+    auto emissionMis = [&](double distance) { return distance * distance / (distance * distance + sqr(kEmissionMisDistanceMm)); };
+    auto emissionConnection = [&](const Vec3& p, auto&& phasePdf) -> SampledSpectrum {
+        const double uCell = rng.uniform(), ux = rng.uniform(), uy = rng.uniform(), uz = rng.uniform(), uLight = rng.uniform(),
+                     uSide = rng.uniform();
+        const auto point = st.imaging->sampleEmissionPoint(uCell, ux, uy, uz);
+        if (!point || !(point->pdf > 0)) return SampledSpectrum(0.0);
+        const Vec3 d = point->p - p;
+        const double distance = length(d);
+        if (!(distance > 0)) return SampledSpectrum(0.0);
+        const Vec3 w = d / distance;
+        const double f = phasePdf(w);
+        if (!(f > 0)) return SampledSpectrum(0.0);
+        const StraightLine line = traceStraightLine(scene_, Ray{p, w}, medium, 0.0, distance, LineSurfaces::StopAtAny);
+        if (line.end != LineEnd::Open) return SampledSpectrum(0.0);
+        const int pointMedium = line.segments.empty() ? medium : line.segments.back().medium;
+        if (!fluorescence_.active(pointMedium)) return SampledSpectrum(0.0);
+        const Medium& med = scene_.media[static_cast<size_t>(pointMedium)];
+        ChannelValues ch;
+        med.channelValues(point->p, ch.data());
+        // The excitation by one beam side (chosen as next-event estimation chooses) at each of its lines.
+        const size_t count = lightList_.size();
+        const size_t index = std::min(count - 1, static_cast<size_t>(uLight * static_cast<double>(count)));
+        const BeamLight* beam = std::get_if<BeamLight>(&lightList_[index]);
+        if (!beam) return SampledSpectrum(0.0);
+        const BeamProfile& profile = *beam->profile;
+        const int side = std::min(profile.sides() - 1, static_cast<int>(uSide * profile.sides()));
+        const double select = 1.0 / (static_cast<double>(count) * profile.sides());
+        SampledSpectrum source(0.0);
+        if (!st.imaging->computesUnscatteredAt(point->p)) return source;
+        for (const SpectralLine& l : profile.spectrum().spectralLines()) {
+            if (!(l.power > 0) || !profile.inCore(point->p, side, l.lambdaNm)) continue;
+            const double E = profile.irradiance(point->p, side, l.lambdaNm) * 1e6 * l.power;
+            if (!(E > 0)) continue;
+            const double Tb = beamTransmittance(point->p, -profile.direction(side), pointMedium, SampledWavelengths::atLine(l.lambdaNm, 1.0), rng)[0];
+            if (!(Tb > 0)) continue;
+            for (int j = 0; j < kNumWavelengths; ++j)
+                source[j] += fluorescence_.kernel(pointMedium, ch.data(), l.lambdaNm, wl.lambda[j]) * kInv4Pi * E * Tb / select;
+        }
+        if (!source) return source;
+        const SampledSpectrum T = transmittance(p, point->p, medium, wl, rng);
+        if (!T) return SampledSpectrum(0.0);
+        const double mis = emissionMis(distance);
+        return beta * T * source * (f * mis / (distance * distance * point->pdf)) / r_u.average();
+    };
+
+    auto scatterInMedium = [&](const Vec3& p, const HenyeyGreenstein& phase, double proposalG, StartBeamWeight startBeam) {
         const Vec3 dirIn = ray.d;
         L += directLight(
             p, medium, r_u,
@@ -326,18 +519,35 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                 const double v = phase.pdf(dirIn, wi);
                 return std::pair{SampledSpectrum(v), v};
             },
-            Vec3(), nullptr, 0.0, skipBeamCores);
+            Vec3(), nullptr, 0.0, startBeam);
+        const bool sheets = sheetLinesAt(wl);
+        // Camera paths (not sub-paths) at emission wavelengths connect to the computed emission.
+        const bool emission = st.imaging && !st.startsAtEmission && st.generation == 0 && !wl.discrete && fluorescence_.active();
+        if (emission) Lf += emissionConnection(p, [&](const Vec3& wi) { return phase.pdf(dirIn, wi); });
+        double floorExtinction = 0;  // at the line, in the medium at p: the phase-sampled side's density proxy
+        if (sheets && medium != kNone) {
+            const Medium& med = scene_.media[static_cast<size_t>(medium)];
+            const MediumSample fl = med.spectra(wl).at(med.channelFloor().data());
+            floorExtinction = fl.sigmaA[0] + fl.sigmaS[0];
+        }
+        if (sheets) L += sheetScattering(p, proposalG, floorExtinction, [&](const Vec3& wi) { return phase.pdf(dirIn, wi); });
         double phasePdf = 0;
         const Vec3 wi = phase.sample(dirIn, rng.uniform(), rng.uniform(), &phasePdf);
         r_l = r_u / phasePdf;
         prevScatter = p;
         lightSampledAtLastVertex = true;
+        st.sheetSampledAtLastVertex = sheets;
+        st.lastFloorExtinction = floorExtinction;
+        st.emissionSampledAtLastVertex = emission;
+        st.lastPhasePdf = phasePdf;
+        st.lastProposalG = proposalG;
         ray = Ray{p, wi};
     };
 
     if (st.startsAtEmission) {
         static const HenyeyGreenstein isotropic(0.0);
-        scatterInMedium(ray.o, isotropic, st.skipBeamCoresAtStart);
+        const double g = medium != kNone ? scene_.media[static_cast<size_t>(medium)].phase().g() : 0.0;
+        scatterInMedium(ray.o, isotropic, g, st.startBeam);
     }
 
     while (true) {
@@ -392,9 +602,27 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                         if (rng.uniform() * sigmaBBar[0] < sigmaB[0]) {
                             const double pdf = Tm[0] * sigmaB[0];
                             const SampledSpectrum r_e = r_u * sigmaB * Tm / pdf;
-                            if (r_e)
-                                Lf += fluorescence(ray.at(t), medium, ch.data(), wl, beta * Tm / (pdf * r_e.average()), rng, stats,
-                                                   st.generation, depth, st.directCameraSegment);
+                            if (r_e) {
+                                const Vec3 y = ray.at(t);
+                                // On the first segment the branch point is the vertex the camera images, and the
+                                // camera's imaging computes its unscattered excitation; after a connection to
+                                // the computed emission, that excitation is weighed against it.
+                                StartBeamWeight startBeam;
+                                SampledSpectrum w = beta * Tm / (pdf * r_e.average());
+                                if (st.firstSegment && st.imaging) {
+                                    w *= st.imaging->firstVertexWeight(y, wl);
+                                    startBeam = {st.imaging, 0.0};
+                                } else if (st.emissionSampledAtLastVertex) {
+                                    const double mis = st.imaging->emissionPointPdf(y) > 0 ? 1 - emissionMis(length(y - prevScatter)) : 1.0;
+                                    startBeam = {st.imaging, mis};
+                                }
+                                const SampledSpectrum branch = fluorescence(y, medium, ch.data(), wl, w, rng, stats, st.generation, depth, startBeam);
+                                Lf += branch;
+                                if (st.firstSegment && st.imaging) {
+                                    st.firstSegmentTotal += branch;
+                                    if (const int k = st.imaging->imageLevel(y); k > 0) st.firstSegmentPooled[static_cast<size_t>(k)] += branch;
+                                }
+                            }
                         }
                         const SampledSpectrum ratio = Tm * sigmaBBar / (Tm[0] * sigmaBBar[0]);
                         beta *= ratio;
@@ -423,10 +651,14 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                             terminated = true;
                             return false;
                         }
-                        const bool skipCores = st.directCameraSegment;
-                        st.directCameraSegment = false;
+                        const Vec3 y = ray.at(t);
+                        if (st.firstSegment && st.imaging) {
+                            beta *= st.imaging->firstVertexWeight(y, wl);
+                            st.level = st.imaging->imageLevel(y);
+                        }
+                        st.firstSegment = false;
                         if (beta && r_u) {
-                            scatterInMedium(ray.at(t), med.phase(), skipCores);
+                            scatterInMedium(y, med.phase(), med.phase().g(), {});
                             scattered = true;
                         }
                         return false;
@@ -441,9 +673,9 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                     }
                     return bool(beta) && bool(r_u);
                 });
-            if (terminated || !beta || !r_u) return {L, Lf};
+            if (terminated || !beta || !r_u) return finish();
             if (scattered) {
-                if (!survivesRoulette(false)) return {L, Lf};
+                if (!survivesRoulette(false)) return finish();
                 continue;
             }
             beta *= T_maj / T_maj[0];
@@ -453,14 +685,32 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
 
         if (!hit) break;  // no environment light
         const ShapeInfo& shape = scene_.shapes[hit->shape];
+        // A surface with a material is the first vertex of a camera path that has met nothing before it;
+        // an emitter without one images only its own emission there.
+        SampledSpectrum imagingWeight(1.0);
+        if (st.firstSegment && st.imaging && (shape.material != kNone || shape.areaLight != kNone)) {
+            imagingWeight = st.imaging->firstVertexWeight(hit->p, wl);
+            if (shape.material != kNone) st.level = st.imaging->imageLevel(hit->p);
+        }
+        if (shape.material != kNone) {
+            beta *= imagingWeight;
+            imagingWeight = SampledSpectrum(1.0);
+        }
         if (shape.areaLight != kNone) {
             const auto& light = std::get<AreaLight>(scene_.lights[static_cast<size_t>(shape.areaLight)]);
-            const SampledSpectrum Le = lights_.emitted(light, hit->n, -ray.d, wl);
+            const SampledSpectrum Le = lights_.emitted(light, hit->n, -ray.d, wl) * imagingWeight;
             if (Le) {
-                if (!lightSampledAtLastVertex) L += beta * Le / r_u.average();
+                SampledSpectrum c;
+                if (!lightSampledAtLastVertex) c = beta * Le / r_u.average();
                 else {
                     const double lightPdf = lights_.pdf(prevScatter, hit->shape, hit->p, hit->n);
-                    L += beta * Le / (r_u + r_l * lightPdf).average();
+                    c = beta * Le / (r_u + r_l * lightPdf).average();
+                }
+                L += c;
+                // An emitter seen directly through the first segment is imaged at its own level.
+                if (st.firstSegment && st.imaging && shape.material == kNone) {
+                    st.firstSegmentTotal += c;
+                    if (const int k = st.imaging->imageLevel(hit->p); k > 0) st.firstSegmentPooled[static_cast<size_t>(k)] += c;
                 }
             }
         }
@@ -476,7 +726,9 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             break;
         }
         ++stats.surfaceBounces;
-        st.directCameraSegment = false;
+        st.firstSegment = false;
+        st.sheetSampledAtLastVertex = false;
+        st.emissionSampledAtLastVertex = false;
         const Material& mat = *scene_.materials[static_cast<size_t>(shape.material)];
         // Opaque surfaces are two-sided; interfaces keep their outward orientation.
         const Vec3 n = shape.isInterface ? hit->n : faceForward(hit->n, -ray.d);
@@ -493,7 +745,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                     const SampledSpectrum f = mat.f(wo, wiLocal, wl, eta, TransportMode::Radiance) * std::abs(wiLocal.z);
                     return std::pair{f, mat.pdf(wo, wiLocal, eta)};
                 },
-                n, &shape, hit->epsilon, false);
+                n, &shape, hit->epsilon, {});
         }
 
         const auto bs = mat.sample(wo, rng.uniform(), rng.uniform(), rng.uniform(), wl, eta, TransportMode::Radiance);
@@ -510,7 +762,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         if (!beta) break;
         if (!survivesRoulette(bs->specular)) break;
     }
-    return {L, Lf};
+    return finish();
 }
 
 }  // namespace fluorosim

@@ -10,7 +10,9 @@
 // inelastic source term at new (excitation) wavelengths, then continues elastically. The sub-path is
 // a full path of its own (multiple scattering, NEE, further fluorescence generations) in the full
 // model, and a single transmittance-weighted light connection in the paper's model.
+#include <array>
 #include <cstdint>
+#include <optional>
 
 #include "core/rng.h"
 #include "render/fluorescence.h"
@@ -40,9 +42,41 @@ struct PathStats {
 
 // Radiance at the camera's wavelengths, split by history: `fluorescent` has gone through at least
 // one re-emission, `elastic` never has (it includes elastically scattered excitation light).
+inline constexpr int kImageLevels = 8;
 struct PathRadiance {
     SampledSpectrum elastic, fluorescent;
+    // Of the total, what a camera's imaging pools over blocks of 2^k × 2^k pixels, by k >= 1
+    // (CameraPathImaging::imageLevel); the rest is imaged per pixel.
+    std::array<SampledSpectrum, kImageLevels> pooled{};
     SampledSpectrum total() const { return elastic + fluorescent; }
+};
+
+// What a caller that images camera paths (the microscope) puts around one path: a weight at the path's
+// first vertex, where the light the path carries leaves toward the camera (a diffraction PSF in place of
+// the geometric image of that point), and the part of the transport the caller computes itself, which
+// the path then leaves out so that the two add up to the model (docs/model.md, "The computed image").
+class CameraPathImaging {
+public:
+    virtual ~CameraPathImaging() = default;
+    // Factor on the throughput at the first vertex y (a scattering or fluorescence branch point, or a
+    // surface) at the path's wavelengths; it multiplies f, not the pdfs.
+    virtual SampledSpectrum firstVertexWeight(const Vec3& y, const SampledWavelengths& wl) const = 0;
+    // Whether the caller computes the fluorescence that a beam's unscattered light (at a spectral line,
+    // inside the beam's core) excites at y, a point of the camera path's first straight segment.
+    virtual bool computesUnscatteredAt(const Vec3& y) const = 0;
+    // Scattered emission: points of that computed emission, drawn by a density per mm³ roughly in
+    // proportion to its power, so that a camera path connects to it from where it scatters (optional).
+    struct EmissionPoint {
+        Vec3 p;
+        double pdf = 0;
+    };
+    virtual std::optional<EmissionPoint> sampleEmissionPoint(double /*uCell*/, double /*ux*/, double /*uy*/, double /*uz*/) const {
+        return std::nullopt;
+    }
+    virtual double emissionPointPdf(const Vec3& /*p*/) const { return 0.0; }
+    // How finely the light that leaves y (a first vertex) is imaged: 0 per pixel, k in [1, kImageLevels)
+    // pooled over blocks of 2^k × 2^k pixels (where y's image is a disc much wider than the block).
+    virtual int imageLevel(const Vec3& /*y*/) const { return 0; }
 };
 
 // What sampling before a camera path gave each wavelength: a caller that draws part of the path itself
@@ -51,9 +85,15 @@ struct PathRadiance {
 // into Li). A product of two separately normalized one-sample MIS weights would be biased.
 struct PathStart {
     SampledSpectrum beta{1.0}, r_u{1.0};
-    // The unscattered light of the beams' cores along the camera ray's first straight segment is
-    // estimated separately (render/direct_beam.h): leave it out here, so the two add up to the model.
-    bool directBeamsSeparate = false;
+    const CameraPathImaging* imaging = nullptr;  // none: a plain camera path
+};
+
+// How a sub-path started at a branch point weighs its first vertex's connection to a beam's unscattered
+// light where the camera's imaging computes that emission: 0 on the camera path's first segment (the
+// caller computes it), the MIS weight after a connection to the computed emission, 1 otherwise.
+struct StartBeamWeight {
+    const CameraPathImaging* imaging = nullptr;
+    double weight = 1;
 };
 
 class PathTracer {
@@ -100,20 +140,20 @@ private:
                     bool residual) const;
     PathRadiance trace(PathState& state, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;
     // A path that starts at p in an isotropic direction (a re-emission point) with throughput beta.
-    // With `skipBeamCores`, its first vertex leaves out beams whose core holds p (PathStart).
     PathRadiance traceFromEmission(const Vec3& p, int medium, const SampledWavelengths& wl, const SampledSpectrum& beta, int depth,
-                                   int generation, Rng& rng, PathStats& stats, bool skipBeamCores = false) const;
+                                   int generation, Rng& rng, PathStats& stats, StartBeamWeight startBeam = {}) const;
     // Radiance re-emitted at p towards the path, at the camera wavelengths, for a branch whose
     // source-term estimate is multiplied by `weight` (throughput over branch pdf, MIS-normalized).
     SampledSpectrum fluorescence(const Vec3& p, int medium, const double* channels, const SampledWavelengths& wl,
                                  const SampledSpectrum& weight, Rng& rng, PathStats& stats, int generation, int depth,
-                                 bool skipBeamCores) const;
+                                 StartBeamWeight startBeam) const;
     int mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const Vec3& dir, int current) const;
 
     const Scene& scene_;
     std::vector<Light> lightList_;
     LightSampler lights_;
     FluorescencePlan fluorescence_;
+    bool hasBeams_ = false;  // some light is a beam: the sheet-side strategy runs at its lines
 };
 
 }  // namespace fluorosim

@@ -360,6 +360,8 @@ double DensityGrid::value(const Vec3& p, Interpolation interpolation) const {
     return interpolation == Interpolation::Nearest ? impl_->voxels.nearest(p) : impl_->voxels.trilinear(p);
 }
 
+void DensityGrid::copyVoxels(const IndexBox& box, float* out) const { impl_->voxels.copyBox(box, out); }
+
 void DensityGrid::forEachBlock(const std::function<void(const IndexBox&, double)>& callback) const {
     for (const auto& [b, v] : impl_->blocks) callback(b, v);
 }

@@ -55,6 +55,8 @@ public:
 
     // Value at a continuous index-space position.
     double value(const Vec3& indexPos, Interpolation interpolation) const;
+    // The voxel values of `box` (x fastest, then y, then z) into `out`, which holds the box's voxel count.
+    void copyVoxels(const IndexBox& box, float* out) const;
     // Voxel and tile blocks that can hold values other than the background: callback(box, max value).
     void forEachBlock(const std::function<void(const IndexBox&, double maxValue)>& callback) const;
 

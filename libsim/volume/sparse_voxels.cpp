@@ -103,6 +103,23 @@ float SparseVoxels::outsideBlocks(int32_t i, int32_t j, int32_t k) const {
     return background_;
 }
 
+void SparseVoxels::copyBox(const IndexBox& box, float* out) const {
+    if (box.empty()) return;
+    const int32_t nx = box.hi[0] - box.lo[0] + 1, ny = box.hi[1] - box.lo[1] + 1;
+    for (int32_t k = box.lo[2]; k <= box.hi[2]; ++k)
+        for (int32_t j = box.lo[1]; j <= box.hi[1]; ++j) {
+            float* row = out + (static_cast<size_t>(k - box.lo[2]) * ny + static_cast<size_t>(j - box.lo[1])) * nx;
+            for (int32_t i = box.lo[0]; i <= box.hi[0];) {
+                // One block (or the stretch outside blocks up to the next block boundary) at a time.
+                const int32_t end = std::min(box.hi[0], static_cast<int32_t>((i & ~7) + 7));
+                const uint64_t key = blockKey(i, j, k);
+                const Block* b = key == kOutsideKey ? nullptr : find(key);
+                for (; i <= end; ++i)
+                    row[i - box.lo[0]] = b ? b->value(voxelOffset(i, j, k), values_.data(), background_) : outsideBlocks(i, j, k);
+            }
+        }
+}
+
 float SparseVoxels::nearest(const Vec3& p) const {
     if (!(std::abs(p.x) < kPositionLimit && std::abs(p.y) < kPositionLimit && std::abs(p.z) < kPositionLimit)) return background_;
     return voxel(static_cast<int32_t>(std::floor(p.x + 0.5)), static_cast<int32_t>(std::floor(p.y + 0.5)),

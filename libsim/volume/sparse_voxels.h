@@ -53,6 +53,8 @@ public:
     // Trilinear interpolation of the eight voxels around p, in float with NanoVDB's order of operations,
     // so results match the NanoVDB sampler bit for bit.
     float trilinear(const Vec3& p) const;
+    // The voxels of `box` into out (x fastest, then y, then z), one hash lookup per 8³ block.
+    void copyBox(const IndexBox& box, float* out) const;
 
 private:
     struct Block {

@@ -38,6 +38,8 @@ public:
                  MajorantGridOptions majorants = {});
 
     int channelCount() const { return static_cast<int>(channels_.size()); }
+    const VolumeChannel& channel(int c) const { return channels_.at(static_cast<size_t>(c)); }
+    Interpolation interpolation() const { return interpolation_; }
     // Channel values at a world position, into out[channelCount()].
     void values(const Vec3& pWorld, double* out) const;
     const Affine& worldFromIndex() const { return worldFromIndex_; }

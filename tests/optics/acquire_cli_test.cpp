@@ -159,27 +159,29 @@ TEST(ValidateLightSheetCli, ScatteringLowersContrastWithDepth) {
     const json j = json::parse(readFile(out));
     const json& c = j.at("contrast_at_3w");
     EXPECT_GT(c.at(0).get<double>(), 10 * c.at(2).get<double>());
-    EXPECT_GT(j.at("fwhm_um").at(2).get<double>(), j.at("unscattered_fwhm_um").at(2).get<double>());
+    // The thickness is compared half way (0.5 mm: 8.0 um against 5.9 um unscattered at 1024 to 16384
+    // samples); at the far end the profile is nearly flat (contrast about 2), so its half-maximum width is
+    // ill-conditioned at this sample count (13 to 43 um).
+    EXPECT_GT(j.at("fwhm_um").at(1).get<double>(), 1.2 * j.at("unscattered_fwhm_um").at(1).get<double>());
 }
 
-// Bleed-through between channels: an AF488 bead and an AF594 bead, a "green" channel (488 nm sheet,
-// 525/45) and a "red" one lit by both sheets at once (609/54). The AF488 bead shows up in the red
-// channel through its emission tail, in the ratio of the filters' overlap with its emission,
-// ∫ f T_609 / ∫ f T_525 (its absorption at 561 nm is about 0.3 % of that at 488 nm).
+// Bleed-through between channels: an AF488 bead, a "green" channel (488 nm sheet, 525/45) and a "red"
+// one lit by both sheets at once (609/54). The bead shows up in the red channel through its emission
+// tail, in the ratio of the filters' overlap with its emission, ∫ f T_609 / ∫ f T_525 (its tabulated
+// absorption at 561 nm is 0). A second, AF594 bead is left out: the diffraction PSF's tail carries a
+// few per cent of its light across any crop.
 TEST(AcquireCli, ChannelsShowBleedThroughBetweenDyes) {
     TempDir dir;
     json j = json::parse(readFile(kBeads));
     j["shapes"] = json::array({json{{"type", "mesh"}, {"file", (kBeads.parent_path() / "bath.obj").string()}, {"unit", "um"}, {"interior", "water"}},
-                               json{{"type", "sphere"}, {"center", {"-0.005 mm", "0 mm", "0 mm"}}, {"radius", "1 um"}, {"interior", "green"}, {"exterior", "water"}},
-                               json{{"type", "sphere"}, {"center", {"0.005 mm", "0 mm", "0 mm"}}, {"radius", "1 um"}, {"interior", "red"}, {"exterior", "water"}}});
+                               json{{"type", "sphere"}, {"center", {"0 mm", "0 mm", "0 mm"}}, {"radius", "1 um"}, {"interior", "green"}, {"exterior", "water"}}});
     j["media"]["green"] = json{{"ior", 1.33}, {"dyes", json::array({json{{"dye", "AF488"}, {"concentration", "100 uM"}}})}};
-    j["media"]["red"] = json{{"ior", 1.33}, {"dyes", json::array({json{{"dye", "AF594"}, {"concentration", "100 uM"}}})}};
     j["media"].erase("bead");
     j["lights"][0]["waist"] = "3 um";
     j["lights"].push_back(j["lights"][0]);
     j["lights"][1]["wavelength"] = "561 nm";
-    j["microscope"]["detector"]["width"] = 48;
-    j["microscope"]["detector"]["height"] = 48;
+    j["microscope"]["detector"]["width"] = 96;
+    j["microscope"]["detector"]["height"] = 96;
     j["microscope"]["channels"] = json::array({json{{"name", "green"}, {"emission_filter", "semrock_FF01-525-45"}, {"lights", {0}}},
                                                json{{"name", "red"}, {"emission_filter", "semrock_FF01-609-54"}, {"lights", {0, 1}}}});
     const fs::path scene = dir.write("two.json", j.dump());
@@ -190,21 +192,22 @@ TEST(AcquireCli, ChannelsShowBleedThroughBetweenDyes) {
     const optics::TiffStackInfo se = optics::readTiffStack(dir.path() / "two.stderr.ome.tif", true);
     ASSERT_EQ(e.pages, 2);
     ASSERT_EQ(se.pages, 2);
-    // Electrons above the dark level in the left half (the AF488 bead) of each channel, and their
-    // Monte Carlo variance (pixels are independent estimates).
+    // Electrons above the dark level over the whole image of each channel, and their Monte Carlo
+    // variance (pixels are independent estimates). The field (±19.5 um) holds all but the PSF's far tail,
+    // about 0.5 % in either channel (2/(π² v) per edge), so their ratio is the spectral one to 1e-3.
     const double dark = 0.5 * 0.01;
-    auto leftHalf = [&](int channel) {
+    auto wholeImage = [&](int channel) {
         double sum = 0, variance = 0;
-        for (int y = 0; y < 48; ++y)
-            for (int x = 0; x < 24; ++x) {
-                const size_t i = static_cast<size_t>(channel) * 48 * 48 + static_cast<size_t>(y * 48 + x);
+        for (int y = 0; y < 96; ++y)
+            for (int x = 0; x < 96; ++x) {
+                const size_t i = static_cast<size_t>(channel) * 96 * 96 + static_cast<size_t>(y * 96 + x);
                 sum += e.pixels[i] - dark;
                 variance += se.pixels[i] * se.pixels[i];
             }
         return std::pair{sum, variance};
     };
-    const auto [green, greenVariance] = leftHalf(0);
-    const auto [red, redVariance] = leftHalf(1);
+    const auto [green, greenVariance] = wholeImage(0);
+    const auto [red, redVariance] = wholeImage(1);
     const double ratio = red / green;
     const double ratioStderr = ratio * std::sqrt(greenVariance / (green * green) + redVariance / (red * red));
     const Fluorophore af488 = databaseDye("AF488");
@@ -263,7 +266,7 @@ TEST(AcquireCli, BadNumbersAreRejectedNotCast) {
         {{}, {"--planes", "0"}, {"--planes", "0"}},
         {{}, {"--step", "-1um"}, {"--step"}},
         {{}, {"--estimator", "fast"}, {"--estimator", "fast"}},
-        {{}, {"--direct-spp", "0"}, {"--direct-spp", "0"}},
+        {{}, {"--direct-spp", "32"}, {"--direct-spp", "removed"}},
         {{}, {"--noise-ratio", "-0.5"}, {"--noise-ratio", "-0.5"}},
         {{}, {"--noise-ratio", "inf"}, {"--noise-ratio", "inf"}},
         {{}, {"--max-spp", "64"}, {"--max-spp", "--noise-ratio"}},

@@ -3,6 +3,8 @@
 // standard errors, on crops of a grid medium lit by a light sheet, in clear and in scattering tissue.
 // The dye lies in a filament in the sheet and in a second one 15 µm beside it, which only scattered
 // excitation reaches (the haze), so both parts of the split carry signal when the tissue scatters.
+// This test found the computed part 16 % dark: 3 x 3 points per pixel integrate a PSF narrower than
+// the pixel (NA 0.5, 1.5 um pixels) wrongly; the count now follows the PSF's band.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -92,11 +94,11 @@ void expectSameImage(double sigmaS, int pathSpp, int splitSpp) {
     const Scene scene = filamentScene(sigmaS);
     const optics::PlaneImage path = render(scene, optics::Estimator::Path, pathSpp, 11);
     const optics::PlaneImage split = render(scene, optics::Estimator::Split, splitSpp, 12);
-    std::printf("  sigma_s %.0f/mm: path %.1f s, split %.1f s (direct part %.3g of %.3g e-)\n", sigmaS, path.seconds, split.seconds,
-                split.directElectrons, split.directElectrons + split.pathElectrons);
-    EXPECT_GT(split.directElectrons, 0.0);
+    std::printf("  sigma_s %.0f/mm: path %.1f s, split %.1f s (computed part %.3g of %.3g e-)\n", sigmaS, path.seconds, split.seconds,
+                split.computedElectrons, split.computedElectrons + split.pathElectrons);
+    EXPECT_GT(split.computedElectrons, 0.0);
     if (sigmaS > 0) {
-        EXPECT_GT(split.pathElectrons, 0.01 * split.directElectrons);  // both parts carry signal
+        EXPECT_GT(split.pathElectrons, 0.01 * split.computedElectrons);  // both parts carry signal
     }
     // The whole image and its four quadrants.
     const int h = kSize / 2;

@@ -81,10 +81,10 @@ def test_acquire_takes_the_cli_estimator_options(tmp_path):
     stack = fluorosim.acquire(str(scene), planes=2, spp=4, seed=5, estimator="path")
     assert stack["estimator"] == "path"
     np.testing.assert_array_equal(stack["expected"].ravel(), tifffile.imread(tmp_path / "p.expected.ome.tif").ravel())
-    options = ["--planes", "1", "--spp", "4", "--seed", "5", "--noise-ratio", "0.5", "--max-spp", "64", "--direct-spp", "32"]
+    options = ["--planes", "1", "--spp", "4", "--seed", "5", "--noise-ratio", "0.5", "--max-spp", "64"]
     run = cli("acquire", scene, "-o", tmp_path / "a.ome.tif", *options)
     assert run.returncode == 0, run.stderr
-    adaptive = fluorosim.acquire(str(scene), planes=1, spp=4, seed=5, noise_ratio=0.5, max_spp=64, direct_spp=32)
+    adaptive = fluorosim.acquire(str(scene), planes=1, spp=4, seed=5, noise_ratio=0.5, max_spp=64)
     np.testing.assert_array_equal(adaptive["expected"].ravel(), tifffile.imread(tmp_path / "a.expected.ome.tif").ravel())
     with pytest.raises(ValueError, match="--estimator"):
         fluorosim.acquire(str(scene), planes=1, estimator="fast")
@@ -92,6 +92,9 @@ def test_acquire_takes_the_cli_estimator_options(tmp_path):
         fluorosim.acquire(str(scene), planes=1, noise_ratio=-1.0)
     with pytest.raises(ValueError, match="--threads"):
         fluorosim.acquire(str(scene), planes=1, threads=65537)
+    # The sampled direct part is gone: its option says so instead of being ignored.
+    with pytest.raises(ValueError, match="direct_spp: removed"):
+        fluorosim.acquire(str(scene), planes=1, direct_spp=32)
 
 
 def test_voxelize_writes_the_cli_grids(tmp_path):

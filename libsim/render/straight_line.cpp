@@ -1,0 +1,103 @@
+#include "render/straight_line.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "media/free_flight.h"
+
+namespace fluorosim {
+
+StraightLine traceStraightLine(const Scene& scene, const Ray& ray, int medium, double tMin, double tMax, LineSurfaces surfaces) {
+    StraightLine line;
+    Ray r = ray;
+    double tBase = 0, localTMin = tMin;
+    int current = medium;
+    // Every crossing advances along the ray; the cap only guards against numerical stalls.
+    for (int crossings = 0; crossings < 1000000; ++crossings) {
+        const double remaining = tMax - tBase;
+        const auto hit = remaining > localTMin ? scene.geometry.intersect(r, localTMin, remaining) : std::nullopt;
+        const double t1 = hit ? tBase + hit->t : tMax;
+        if (t1 > tBase) line.segments.push_back({tBase, t1, current});
+        if (!hit) {
+            line.end = LineEnd::Open;
+            line.tEnd = tMax;
+            return line;
+        }
+        const ShapeInfo& s = scene.shapes[hit->shape];
+        const bool nullInterface = s.isInterface && s.material == kNone;
+        if (!nullInterface && surfaces != LineSurfaces::ThroughAll) {
+            line.tEnd = t1;
+            if (surfaces == LineSurfaces::StopAtAny) {
+                line.end = LineEnd::Surface;
+            } else {
+                const bool refracts = s.isInterface && s.material != kNone && scene.materials[static_cast<size_t>(s.material)]->isSpecular();
+                line.end = refracts ? LineEnd::Refraction : LineEnd::Blocked;
+            }
+            return line;
+        }
+        if (s.isInterface) current = dot(r.d, hit->n) < 0 ? s.insideMedium : s.outsideMedium;
+        r.o = hit->p;
+        tBase = t1;
+        // Rays leave a surface from on it and skip it with tMin, as the path tracer's do.
+        localTMin = hit->epsilon / std::max(std::abs(dot(hit->n, r.d)), 1e-2);
+    }
+    line.end = LineEnd::Blocked;
+    line.tEnd = tBase;
+    return line;
+}
+
+int mediumAt(const Scene& scene, const Vec3& p, const Vec3& direction) {
+    for (const Vec3& d : {normalize(direction), -normalize(direction)}) {
+        Ray r{p, d};
+        double tMin = 0;
+        for (int crossings = 0; crossings < 1000; ++crossings) {
+            const auto hit = scene.geometry.intersect(r, tMin, std::numeric_limits<double>::infinity());
+            if (!hit) break;
+            const ShapeInfo& s = scene.shapes[hit->shape];
+            if (s.isInterface) return dot(d, hit->n) > 0 ? s.insideMedium : s.outsideMedium;
+            r.o = hit->p;
+            tMin = hit->epsilon / std::max(std::abs(dot(hit->n, d)), 1e-2);
+        }
+    }
+    return scene.camera.medium;
+}
+
+SampledSpectrum quadratureTransmittance(const Scene& scene, const Ray& ray, const std::vector<RaySegment>& segments,
+                                        const SampledWavelengths& wl, double stepVoxels) {
+    SampledSpectrum opticalDepth(0.0);
+    for (const RaySegment& seg : segments) {
+        if (seg.medium == kNone) continue;
+        const Medium& med = scene.media[static_cast<size_t>(seg.medium)];
+        if (med.isVacuumLike() || !(seg.t1 > seg.t0)) continue;
+        const MediumSpectra spec = med.spectra(wl);
+        const double length = seg.t1 - seg.t0;
+        if (!std::isfinite(length)) return SampledSpectrum(0.0);
+        const ChannelValues& floor = med.channelFloor();
+        const MediumSample base = spec.at(floor.data());
+        opticalDepth += (base.sigmaA + base.sigmaS) * length;
+        const VolumeFields* volume = med.volume();
+        if (!volume) continue;
+        const int channels = med.channelCount();
+        const double step = stepVoxels * volume->voxelSizeMm();
+        VolumeFields::Traversal cells = volume->traverse(ray, seg.t0, seg.t1);
+        ChannelValues values{}, residual{};
+        while (const auto cell = cells.next()) {
+            bool varies = false;
+            for (int c = 0; c < channels; ++c) varies = varies || cell->maxValues[c] > floor[c];
+            const double cellLength = cell->tMax - cell->tMin;
+            if (!varies || !(cellLength > 0)) continue;
+            const int n = std::max(1, static_cast<int>(std::ceil(cellLength / step)));
+            const double h = cellLength / n;
+            for (int i = 0; i < n; ++i) {
+                med.channelValues(ray.at(cell->tMin + (i + 0.5) * h), values.data());
+                for (int c = 0; c < channels; ++c) residual[c] = std::max(0.0, values[c] - floor[c]);
+                const MediumSample s = spec.at(residual.data());
+                opticalDepth += (s.sigmaA + s.sigmaS) * h;
+            }
+        }
+    }
+    return expNeg(opticalDepth);
+}
+
+}  // namespace fluorosim

@@ -1,0 +1,49 @@
+#pragma once
+// Straight lines through a scene, without sampling: the media a line crosses and where it ends, the
+// medium at a point, and the transmittance along a line by quadrature. Estimators that compute part
+// of the image instead of sampling it (the microscope's unscattered image) use these; the path tracer
+// uses the same surface rules, so both see one geometry.
+#include <vector>
+
+#include "scene/scene.h"
+
+namespace fluorosim {
+
+// A straight piece [t0, t1] of a ray inside one medium (kNone: no medium).
+struct RaySegment {
+    double t0, t1;
+    int medium;
+};
+
+// Which surfaces end a line. Null interfaces (index-matched, no material) never do.
+enum class LineSurfaces {
+    StopAtAny,         // the first other surface ends the line (a camera ray's first straight segment)
+    UntilRefraction,   // a smooth dielectric ends it (where a beam entered the sample); any other surface blocks it
+    ThroughAll,        // no surface ends it; interfaces switch the medium (geometry queries)
+};
+enum class LineEnd { Open, Surface, Refraction, Blocked };
+
+struct StraightLine {
+    std::vector<RaySegment> segments;  // in order, every medium crossed (vacuum-like ones included)
+    LineEnd end = LineEnd::Open;       // Open: reached tMax (or infinity) without a stopping surface
+    double tEnd = 0;                   // where the line ended (tMax when Open)
+};
+
+// Walks `ray` from tMin to tMax starting in `medium`. `tMin` > 0 when ray.o lies on a surface the ray
+// leaves (the path tracer's convention: rays start on surfaces and skip them with tMin).
+StraightLine traceStraightLine(const Scene& scene, const Ray& ray, int medium, double tMin, double tMax, LineSurfaces surfaces);
+
+// The medium at p, from the nearest interface along `direction` (then the opposite one): its inside or
+// outside by the side the ray meets it from. Opaque surfaces that are not interfaces are looked through.
+// Where no interface encloses p, the scene's camera medium fills space (as for camera rays that cross
+// nothing).
+int mediumAt(const Scene& scene, const Vec3& p, const Vec3& direction);
+
+// Transmittance along the segments of `ray` at the wavelengths `wl`, without sampling noise: exact in
+// homogeneous media; in grid media each channel's floor exactly and the rest by the midpoint rule at
+// steps of at most `stepVoxels` voxels, only over majorant cells where a channel rises above its floor.
+// The quadrature error is O(step²) for trilinear fields and vanishes as the step shrinks.
+SampledSpectrum quadratureTransmittance(const Scene& scene, const Ray& ray, const std::vector<RaySegment>& segments,
+                                        const SampledWavelengths& wl, double stepVoxels = 0.5);
+
+}  // namespace fluorosim
