@@ -349,6 +349,12 @@ UnscatteredModel::UnscatteredModel(const Scene& scene, const std::vector<Light>&
         const double cyclesPerPixel = m.pixelMm * 2 * plane.psf().pupil().na / (lambdaShort * 1e-6);
         m.pixelNodes = std::clamp(static_cast<int>(std::ceil(2 * cyclesPerPixel + 3)), m.o.pixelQuadrature, 32);
     }
+    // Axial layers: the PSF is interpolated linearly between them, so they are at most 1/8 of the
+    // depth of field n λ/NA² apart (a bead's axial FWHM at NA 0.8 read 1.0 % wide at 0.25 um).
+    {
+        const double na = plane.psf().pupil().na, n = plane.psf().pupil().sampleIndex;
+        m.axialMm = std::min(m.axialMm, n * lambdaMin * 1e-6 / (na * na) / 8);
+    }
     const double dzLimit = m.psf->maxDzMm(lambdaMin);
     double depth = 0;
     {

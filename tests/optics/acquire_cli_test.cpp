@@ -221,7 +221,9 @@ TEST(AcquireCli, ChannelsShowBleedThroughBetweenDyes) {
     std::printf("  AF488 bead: green %.4g e-, red %.4g e-, bleed-through %.4f +- %.4f, spectral overlap ratio %.4f\n", green, red, ratio,
                 ratioStderr, in609 / in525);
     ASSERT_LT(ratioStderr, 0.1 * ratio);  // the check below must be able to fail
-    EXPECT_NEAR(ratio, in609 / in525, 4 * ratioStderr);
+    // The image is nearly all computed: the tolerance is the field's edge losses (1e-3, above) and 4
+    // standard errors of the paths' part.
+    EXPECT_NEAR(ratio, in609 / in525, 1e-3 * ratio + 4 * ratioStderr);
 }
 
 // Random streams are keyed by channel name and plane: acquiring one channel alone gives the same
