@@ -79,15 +79,26 @@ void writeStackPreview(const fs::path& png, const Stack& stack, int planes, doub
         const float scale = sorted[static_cast<size_t>(0.995 * (sorted.size() - 1))];
         if (!(scale > 0)) continue;
         const float* col = colours[c % 4];
-        auto put = [&](int x, int y, float v) {
-            const float t = std::min(1.0f, v / scale);
+        auto put = [&](int x, int y, float v, float panelScale) {
+            const float t = std::min(1.0f, v / panelScale);
             for (int k = 0; k < 3; ++k) rgb[(static_cast<size_t>(y) * outW + x) * 3 + k] += col[k] * t;
         };
         for (int y = 0; y < height; ++y)
-            for (int x = 0; x < width; ++x) put(x, y, mip[static_cast<size_t>(y) * width + x]);
+            for (int x = 0; x < width; ++x) put(x, y, mip[static_cast<size_t>(y) * width + x], scale);
+        // The x–z panel projects the maximum over y (a single row would miss most neurites of a thin stack),
+        // each plane `stretch` rows tall so that z keeps its physical scale.
+        // It has its own scale (its 99th percentile): a maximum over y is brighter than the x–y projection.
+        std::vector<float> side(static_cast<size_t>(planes) * width, 0.0f);
         for (int k = 0; k < planes; ++k)
-            for (int r = 0; r < stretch; ++r)
-                for (int x = 0; x < width; ++x) put(width + gap + x, k * stretch + r, base[k * plane + static_cast<size_t>(height / 2) * width + x]);
+            for (int x = 0; x < width; ++x)
+                for (int y = 0; y < height; ++y)
+                    side[static_cast<size_t>(k) * width + x] = std::max(side[static_cast<size_t>(k) * width + x], base[k * plane + static_cast<size_t>(y) * width + x]);
+        std::vector<float> sortedSide = side;
+        std::sort(sortedSide.begin(), sortedSide.end());
+        const float sideScale = std::max(sortedSide[static_cast<size_t>(0.99 * (sortedSide.size() - 1))], 1e-30f);
+        for (int k = 0; k < planes; ++k)
+            for (int x = 0; x < width; ++x)
+                for (int r = 0; r < stretch; ++r) put(width + gap + x, k * stretch + r, side[static_cast<size_t>(k) * width + x], sideScale);
     }
     // The PNG writer applies the sRGB curve; these values are already display-scaled in [0, 1].
     writePngPreview(png.string(), outW, outH, rgb, 1.0);
