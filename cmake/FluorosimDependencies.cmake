@@ -2,6 +2,9 @@
 # Order matters: TBB's config before OpenVDB's find module, which would otherwise define TBB::tbb itself.
 find_package(Threads REQUIRED)
 find_package(TBB CONFIG REQUIRED)
+# Ceres (the concentration fit, optics/concentration_fit.cpp) before OpenVDB: its SuiteSparse finder loads
+# TBB's config, which must not meet the TBB::tbb that OpenVDB's find module would define.
+find_package(Ceres 2.1 REQUIRED)
 # OpenEXR's own config (with Imath include paths), before OpenVDB's find modules shadow it.
 find_package(OpenEXR 3 CONFIG REQUIRED)
 

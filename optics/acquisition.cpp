@@ -189,6 +189,8 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         emissionPoints = u.emission;
         r.computedPoints = u.points;
         r.computedSeconds = u.seconds;
+        r.computedTimings = u.timings;
+        r.computedImage = u.electrons;
     }
     // Each row's totals, kept apart so that threads never share them; summed into the image at the end.
     struct RowTotals {
@@ -353,14 +355,16 @@ double emissionCentreNm(const Filter& emission, const Scene& scene) {
 }  // namespace
 
 ChannelImaging setUpChannelImaging(const Scene& scene, const std::vector<Light>& lights, const ObjectiveOptions& objective, const FocalPlane& focus,
-                                   const Filter& emission, const DetectorOptions& detector, int width, int height, const AcquireOptions& o) {
+                                   const Filter& emission, const DetectorOptions& detector, int width, int height, const AcquireOptions& o,
+                                   std::vector<double> planeOffsetsMm, bool labels) {
     checkPlaneArguments(objective, focus, detector, width, height, o);
     ChannelImaging c;
     c.psf = makePsf(scene, objective, focus, emissionCentreNm(emission, scene), o.psf);
     if (o.estimator == Estimator::Split) {
         const FluorescencePlan plan(scene, lights);
         const Imaging imaging(objective, focus, detector, width, height, c.psf);
-        c.unscattered = std::make_shared<const UnscatteredModel>(scene, lights, plan, imaging, detectionOf(emission, detector), o.unscattered);
+        c.unscattered = std::make_shared<const UnscatteredModel>(scene, lights, plan, imaging, detectionOf(emission, detector), o.unscattered,
+                                                                 std::move(planeOffsetsMm), labels);
     }
     return c;
 }
@@ -383,12 +387,14 @@ PlaneImage renderPlane(const Scene& scene, const ObjectiveOptions& objective, co
     return renderWith(scene, tracer, objective, focus, emission, detector, width, height, 0, options, own);
 }
 
-ChannelImaging setUpChannelImaging(const Scene& scene, const Microscope& m, size_t channel, const AcquireOptions& options) {
+ChannelImaging setUpChannelImaging(const Scene& scene, const Microscope& m, size_t channel, const AcquireOptions& options, bool labels) {
     if (channel >= m.channels.size()) throw ConfigError("channel index " + std::to_string(channel) + " is out of range");
     const MicroscopeChannel& c = m.channels[channel];
     // The stack's centre: planes are offset symmetrically about the focus.
+    std::vector<double> offsets;
+    for (int k = 0; k < m.stack.planes; ++k) offsets.push_back(m.planeOffsetMm(k));
     return setUpChannelImaging(scene, m.lightsAt(scene, c, 0.0), m.objective, m.focalPlaneAt(0.0), c.emissionPath, m.detector, m.width, m.height,
-                               options);
+                               options, std::move(offsets), labels);
 }
 
 PlaneImage acquirePlane(const Scene& scene, const Microscope& m, size_t channel, int plane, const AcquireOptions& options,

@@ -70,6 +70,8 @@ struct PlaneImage {
     double pooledElectrons = 0;  // of the paths' part, what was pooled over pixel blocks (far from focus)
     double computedSeconds = 0, pathSeconds = 0;  // wall time of the computed part, thread time of the paths
     uint64_t computedPoints = 0;                  // emission points of the computed part's quadrature
+    UnscatteredTimings computedTimings;           // where the computed part's time went
+    std::vector<double> computedImage;            // the computed part alone (split estimator; empty otherwise)
     // Paths traced for the estimate and for adaptive sampling's pilots (0 without a noise target).
     uint64_t pathSamples = 0, pilotSamples = 0;
     // Heavy tails: the largest single path's electrons, the largest ratio of a pixel's largest path
@@ -89,8 +91,10 @@ struct ChannelImaging {
     std::shared_ptr<const UnscatteredModel> unscattered;
 };
 // Builds it for lights and a focal plane (any plane of the stack; the central one is used by acquireStack).
+// `planeOffsetsMm`: the stack's planes along the axis from `focus` (the computed part's lattice serves them all).
 ChannelImaging setUpChannelImaging(const Scene& scene, const std::vector<Light>& lights, const ObjectiveOptions& objective, const FocalPlane& focus,
-                                   const Filter& emission, const DetectorOptions& detector, int width, int height, const AcquireOptions& options);
+                                   const Filter& emission, const DetectorOptions& detector, int width, int height, const AcquireOptions& options,
+                                   std::vector<double> planeOffsetsMm = {0.0}, bool labels = false);
 
 // Expected photoelectrons of one image with the given lights, focal plane, filter and detector. Without
 // `channel`, the PSF and the computed part's model are built for this plane alone.
@@ -102,7 +106,9 @@ PlaneImage renderPlane(const Scene& scene, const ObjectiveOptions& objective, co
                        const DetectorOptions& detector, int width, int height, const AcquireOptions& options);
 
 // The channel's shared imaging for a microscope (its lights and focal plane at the stack's centre).
-ChannelImaging setUpChannelImaging(const Scene& scene, const Microscope& microscope, size_t channel, const AcquireOptions& options);
+// With `labels`, the computed part's lattice is split by label (for fits).
+ChannelImaging setUpChannelImaging(const Scene& scene, const Microscope& microscope, size_t channel, const AcquireOptions& options,
+                                   bool labels = false);
 // Plane `plane` of channel `channel`: the channel's lights moved with the focal plane.
 PlaneImage acquirePlane(const Scene& scene, const Microscope& microscope, size_t channel, int plane, const AcquireOptions& options,
                         const ChannelImaging* imaging = nullptr);

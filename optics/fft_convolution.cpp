@@ -129,4 +129,30 @@ std::vector<double> FftConvolution::convolveSum(const std::vector<std::vector<do
     return out;
 }
 
+std::vector<double> FftConvolution::correlate(const std::vector<double>& image, int kernel) const {
+    const Impl& m = *impl_;
+    if (kernel < 0 || static_cast<size_t>(kernel) >= m.kernels.size())
+        throw ConfigError("FFT correlation: kernel " + std::to_string(kernel) + " of " + std::to_string(m.kernels.size()));
+    if (image.size() != static_cast<size_t>(m.width) * m.height)
+        throw ConfigError("FFT correlation image has " + std::to_string(image.size()) + " values, expected " + std::to_string(m.width * m.height));
+    const size_t realSize = static_cast<size_t>(m.nx) * m.ny;
+    FftwBuffer real(sizeof(double) * realSize), complex(sizeof(fftw_complex) * m.spectrumSize);
+    double* r = static_cast<double*>(real.data);
+    auto* c = static_cast<std::complex<double>*>(complex.data);
+    std::fill(r, r + realSize, 0.0);
+    for (int y = 0; y < m.height; ++y)
+        std::copy(image.begin() + static_cast<std::ptrdiff_t>(y) * m.width, image.begin() + static_cast<std::ptrdiff_t>(y + 1) * m.width,
+                  r + static_cast<size_t>(y) * m.nx);
+    fftw_execute_dft_r2c(m.forward, r, reinterpret_cast<fftw_complex*>(c));
+    // Correlation is convolution with the mirrored kernel, whose transform is the conjugate (real kernel).
+    const std::vector<std::complex<double>>& k = m.kernels[static_cast<size_t>(kernel)];
+    for (size_t i = 0; i < m.spectrumSize; ++i) c[i] *= std::conj(k[i]);
+    fftw_execute_dft_c2r(m.backward, reinterpret_cast<fftw_complex*>(c), r);
+    std::vector<double> out(static_cast<size_t>(m.width) * m.height);
+    const double scale = 1.0 / static_cast<double>(realSize);
+    for (int y = 0; y < m.height; ++y)
+        for (int x = 0; x < m.width; ++x) out[static_cast<size_t>(y) * m.width + x] = r[static_cast<size_t>(y) * m.nx + x] * scale;
+    return out;
+}
+
 }  // namespace fluorosim::optics

@@ -1,5 +1,6 @@
 #pragma once
-// Sums of 2-D linear convolutions, Σ_b image_b ⊛ kernel_b, through FFTW (which only the .cpp includes).
+// Sums of 2-D linear convolutions, Σ_b image_b ⊛ kernel_b, and their adjoint (correlations), through
+// FFTW (which only the .cpp includes).
 // Images are width × height, row-major; kernels are (2R + 1)² row-major with the centre at (R, R).
 // The transform is large enough that nothing wraps around. Kernels are transformed once; convolveSum
 // may run on several threads at once.
@@ -19,6 +20,8 @@ public:
     int kernelCount() const;
     // Σ_b images[b] ⊛ kernel b; an empty image is skipped.
     std::vector<double> convolveSum(const std::vector<std::vector<double>>& images) const;
+    // The adjoint of one term: out(u) = Σ_x image(x) kernel_b(x − u), over the same image size.
+    std::vector<double> correlate(const std::vector<double>& image, int kernel) const;
 
 private:
     struct Impl;

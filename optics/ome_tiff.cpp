@@ -126,7 +126,7 @@ void writeStack(const fs::path& path, int width, int height, int planes, int cha
         throw ConfigError(path.string() + ": stack size " + std::to_string(width) + " x " + std::to_string(height) + " x " +
                           std::to_string(planes) + " planes x " + std::to_string(channels) + " channels: every size must be >= 1");
     const uint64_t planePixels = static_cast<uint64_t>(width) * static_cast<uint64_t>(height);
-    const uint64_t pages = static_cast<uint64_t>(planes) * static_cast<uint64_t>(channels);
+    const uint64_t pages = static_cast<uint64_t>(planes) * static_cast<uint64_t>(channels) * static_cast<uint64_t>(std::max(1, meta.timePoints));
     if (data.size() != planePixels * pages)
         throw ConfigError(path.string() + ": stack data has " + std::to_string(data.size()) + " samples, expected " +
                           std::to_string(planePixels * pages) + " (width * height * planes * channels)");
@@ -214,12 +214,23 @@ void StackMetadata::validate() const {
     positive("pixelSizeUm", pixelSizeUm, "µm");
     positive("zStepUm", zStepUm, "µm");
     positive("exposureS", exposureS, "s");
+    if (timePoints < 1 || timePoints > 1000000) throw ConfigError("stack metadata: timePoints = " + std::to_string(timePoints) + ": must be in 1..1000000");
     if (significantBits < 0 || significantBits > 16)
         throw ConfigError("stack metadata: significantBits = " + std::to_string(significantBits) + ": must be in 0..16");
     auto text = [](const std::string& field, const std::string& s) {
         if (hasForbiddenControl(s)) throw ConfigError("stack metadata: " + field + " contains a control character XML cannot carry");
     };
     text("description", description);
+    if (values != "adu" && values != "electrons") throw ConfigError("stack metadata: values = \"" + values + "\": must be \"adu\" or \"electrons\"");
+    if (camera) {
+        if (camera->sensor != "sCMOS" && camera->sensor != "EMCCD") throw ConfigError("stack metadata: camera.sensor = \"" + camera->sensor + "\": must be sCMOS or EMCCD");
+        positive("camera.gainElectronsPerAdu", camera->gainElectronsPerAdu, "e-/ADU");
+        positive("camera.emGain", camera->emGain, "");
+        positive("camera.fullWellElectrons", camera->fullWellElectrons, "e-");
+        if (!(camera->offsetAdu >= 0) || !(camera->readNoiseElectrons >= 0) || !(camera->darkCurrentElectronsPerS >= 0) ||
+            !std::isfinite(camera->offsetAdu + camera->readNoiseElectrons + camera->darkCurrentElectronsPerS))
+            throw ConfigError("stack metadata: camera offset, read noise and dark current must be finite and >= 0");
+    }
     text("imageName", imageName);
     for (size_t c = 0; c < channels.size(); ++c) {
         const std::string field = "channels[" + std::to_string(c) + "]";
@@ -239,12 +250,19 @@ std::string omeXml(int width, int height, int planes, int channels, const std::s
          "xmlns:xsi=\"http://www.w3.org/2001/XMLSchema-instance\" "
          "xsi:schemaLocation=\"http://www.openmicroscopy.org/Schemas/OME/2016-06 "
          "http://www.openmicroscopy.org/Schemas/OME/2016-06/ome.xsd\" Creator=\"Fluorosim\">\n";
+    const CameraMetadata* cam = meta.camera ? &*meta.camera : nullptr;
+    if (cam)
+        x += "  <Instrument" + attr("ID", std::string("Instrument:0")) + ">\n    <Detector" + attr("ID", std::string("Detector:0")) +
+             attr("Type", std::string(cam->sensor == "EMCCD" ? "EMCCD" : "CMOS")) + attr("Gain", cam->gainElectronsPerAdu) +
+             attr("Offset", cam->offsetAdu) + attr("AmplificationGain", cam->emGain) + "/>\n  </Instrument>\n";
     x += "  <Image" + attr("ID", std::string("Image:0")) + attr("Name", meta.imageName) + ">\n";
     if (!meta.description.empty()) x += "    <Description>" + xmlEscape(meta.description) + "</Description>\n";
+    if (cam) x += "    <InstrumentRef" + attr("ID", std::string("Instrument:0")) + "/>\n";
     x += "    <Pixels" + attr("ID", std::string("Pixels:0")) + attr("DimensionOrder", std::string("XYZCT")) + attr("Type", pixelType);
     if (pixelType == "uint16" && meta.significantBits > 0) x += attr("SignificantBits", static_cast<long long>(meta.significantBits));
     x += attr("SizeX", static_cast<long long>(width)) + attr("SizeY", static_cast<long long>(height)) +
-         attr("SizeZ", static_cast<long long>(planes)) + attr("SizeC", static_cast<long long>(channels)) + attr("SizeT", 1LL);
+         attr("SizeZ", static_cast<long long>(planes)) + attr("SizeC", static_cast<long long>(channels)) +
+         attr("SizeT", static_cast<long long>(meta.timePoints));
     x += attr("PhysicalSizeX", meta.pixelSizeUm) + attr("PhysicalSizeXUnit", um) + attr("PhysicalSizeY", meta.pixelSizeUm) +
          attr("PhysicalSizeYUnit", um) + attr("PhysicalSizeZ", meta.zStepUm) + attr("PhysicalSizeZUnit", um) + ">\n";
     // Schema order inside Pixels: Channel*, then TiffData*, then Plane*.
@@ -252,16 +270,35 @@ std::string omeXml(int width, int height, int planes, int channels, const std::s
         const ChannelInfo& ch = meta.channels.at(static_cast<size_t>(c));
         x += "      <Channel" + attr("ID", "Channel:0:" + std::to_string(c)) + attr("Name", ch.name) + attr("SamplesPerPixel", 1LL) +
              attr("ExcitationWavelength", ch.excitationNm) + attr("ExcitationWavelengthUnit", std::string("nm")) +
-             attr("EmissionWavelength", ch.emissionNm) + attr("EmissionWavelengthUnit", std::string("nm")) + "/>\n";
+             attr("EmissionWavelength", ch.emissionNm) + attr("EmissionWavelengthUnit", std::string("nm"));
+        if (cam)
+            x += ">\n        <DetectorSettings" + attr("ID", std::string("Detector:0")) + attr("Gain", cam->gainElectronsPerAdu) +
+                 attr("Offset", cam->offsetAdu) + "/>\n      </Channel>\n";
+        else x += "/>\n";
     }
-    const long long pages = static_cast<long long>(planes) * channels;
+    const long long pages = static_cast<long long>(planes) * channels * meta.timePoints;
     x += "      <TiffData" + attr("IFD", 0LL) + attr("PlaneCount", pages) + "/>\n";
+    for (int t = 0; t < meta.timePoints; ++t)
     for (int c = 0; c < channels; ++c)
         for (int z = 0; z < planes; ++z)
-            x += "      <Plane" + attr("TheZ", static_cast<long long>(z)) + attr("TheT", 0LL) + attr("TheC", static_cast<long long>(c)) +
+            x += "      <Plane" + attr("TheZ", static_cast<long long>(z)) + attr("TheT", static_cast<long long>(t)) + attr("TheC", static_cast<long long>(c)) +
                  attr("ExposureTime", meta.exposureS) + attr("ExposureTimeUnit", std::string("s")) +
                  attr("PositionZ", z * meta.zStepUm) + attr("PositionZUnit", um) + "/>\n";
-    x += "    </Pixels>\n  </Image>\n</OME>\n";
+    x += "    </Pixels>\n";
+    if (cam) x += "    <AnnotationRef" + attr("ID", std::string("Annotation:0")) + "/>\n";
+    x += "  </Image>\n";
+    if (cam) {
+        // What the values are and the camera that made them, in explicit units (OME's Detector Gain has none).
+        auto entry = [](const char* key, const std::string& value) { return "        <M" + attr("K", std::string(key)) + ">" + xmlEscape(value) + "</M>\n"; };
+        x += "  <StructuredAnnotations>\n    <MapAnnotation" + attr("ID", std::string("Annotation:0")) + attr("Namespace", std::string(kCameraNamespace)) +
+             ">\n      <Value>\n";
+        x += entry("values", meta.values) + entry("sensor", cam->sensor) + entry("gain_e_per_adu", num(cam->gainElectronsPerAdu)) +
+             entry("offset_adu", num(cam->offsetAdu)) + entry("read_noise_e", num(cam->readNoiseElectrons)) + entry("em_gain", num(cam->emGain)) +
+             entry("dark_current_e_per_s", num(cam->darkCurrentElectronsPerS)) + entry("full_well_e", num(cam->fullWellElectrons)) +
+             entry("bit_depth", std::to_string(cam->bitDepth)) + entry("exposure_s", num(meta.exposureS));
+        x += "      </Value>\n    </MapAnnotation>\n  </StructuredAnnotations>\n";
+    }
+    x += "</OME>\n";
     return x;
 }
 

@@ -2,10 +2,12 @@
 // OME-TIFF stacks (OME 2016-06 schema): one single-sample page per (plane, channel), OME-XML in the
 // first page's ImageDescription, DimensionOrder XYZCT (Z fastest, then C; T = 1). Pages are written in
 // the order of the data: channel-major, then plane (z), then row, then column, i.e. sample
-// (c, z, y, x) is data[((c * planes + z) * height + y) * width + x] and page c * planes + z.
+// (c, z, y, x) is data[((c * planes + z) * height + y) * width + x] and page c * planes + z (with
+// StackMetadata::timePoints > 1, whole stacks follow one another along T).
 // Uncompressed; BigTIFF when the pixel data exceed 3.5 GiB. libtiff stays inside ome_tiff.cpp.
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -17,6 +19,21 @@ struct ChannelInfo {
     double emissionNm = 0;    // written as EmissionWavelength, unit nm
 };
 
+// The camera behind a stack's values, so that a reader can turn ADU back into photoelectrons: written
+// as OME's Detector (Type, Gain, Offset, AmplificationGain) and, unambiguously in these units, as a
+// MapAnnotation in the namespace kCameraNamespace.
+struct CameraMetadata {
+    std::string sensor = "sCMOS";       // "sCMOS" or "EMCCD"
+    double gainElectronsPerAdu = 0.46;  // electrons per ADU (after the EM gain)
+    double offsetAdu = 100;
+    double readNoiseElectrons = 1.4;    // rms
+    double emGain = 1;
+    double darkCurrentElectronsPerS = 0;
+    double fullWellElectrons = 30000;
+    int bitDepth = 16;
+};
+inline constexpr const char* kCameraNamespace = "https://fluorosim.org/ome/camera";
+
 struct StackMetadata {
     double pixelSizeUm = 1;  // in the sample (PhysicalSizeX and PhysicalSizeY, µm)
     double zStepUm = 1;      // PhysicalSizeZ, µm
@@ -25,6 +42,9 @@ struct StackMetadata {
     std::string description;            // Image/Description (free text, UTF-8)
     std::string imageName = "Fluorosim stack";
     int significantBits = 0;  // uint16 only: Pixels/SignificantBits (the ADC bit depth); 0 = not written
+    std::optional<CameraMetadata> camera;  // the detector, with what the values are (below)
+    std::string values = "adu";           // "adu" (camera counts) or "electrons" (expected photoelectrons)
+    int timePoints = 1;                   // SizeT: pages run t-major, then channel, then plane (e.g. one per fit parameter)
 
     // Throws ConfigError naming the field: non-positive or non-finite sizes, exposure or wavelengths,
     // significantBits outside 0..16, text with control characters XML cannot carry.

@@ -44,17 +44,32 @@ StackOutputs StackOutputs::forStack(const fs::path& stack) {
     return {stack, base + ".expected.ome.tif", base + ".stderr.ome.tif", base + ".preview.png"};
 }
 
+CameraMetadata cameraMetadata(const DetectorOptions& d) {
+    CameraMetadata c;
+    c.sensor = d.type == SensorType::Emccd ? "EMCCD" : "sCMOS";
+    c.gainElectronsPerAdu = d.gainElectronsPerAdu;
+    c.offsetAdu = d.offsetAdu;
+    c.readNoiseElectrons = d.readNoiseElectrons;
+    c.emGain = d.emGain;
+    c.darkCurrentElectronsPerS = d.darkCurrentElectronsPerS;
+    c.fullWellElectrons = d.fullWellElectrons;
+    c.bitDepth = d.bitDepth;
+    return c;
+}
+
 void writeStackFiles(const StackOutputs& out, const Stack& stack, const Microscope& m, int planes, const std::string& description) {
     StackMetadata meta;
     meta.pixelSizeUm = m.pixelSizeMm() * 1e3;
     meta.zStepUm = m.stack.stepMm * 1e3;
     meta.exposureS = m.detector.exposureS;
     meta.significantBits = m.detector.bitDepth;
+    meta.camera = cameraMetadata(m.detector);
     for (size_t c : stack.channels) meta.channels.push_back({m.channels[c].name, m.channels[c].excitationNm, m.channels[c].emissionNm});
     const int channels = static_cast<int>(stack.channels.size());
     meta.description = description;
     writeOmeTiffUint16(out.counts, stack.width, stack.height, planes, channels, firstPlanes(stack.counts, stack, planes), meta);
     meta.description = description + "; expected photoelectrons (with dark current, before noise)";
+    meta.values = "electrons";
     writeOmeTiffFloat32(out.expected, stack.width, stack.height, planes, channels, firstPlanes(stack.expected, stack, planes), meta);
     meta.description = description + "; Monte Carlo standard error of the expected photoelectrons";
     writeOmeTiffFloat32(out.stderrElectrons, stack.width, stack.height, planes, channels, firstPlanes(stack.stderrElectrons, stack, planes),

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "optics/acquisition.h"
+#include "optics/ome_tiff.h"
 
 namespace fluorosim::optics {
 
@@ -15,6 +16,9 @@ struct StackOutputs {
     // `stack` does not end in .ome.tif.
     static StackOutputs forStack(const std::filesystem::path& stack);
 };
+
+// The camera of a detector, as a stack's metadata records it.
+CameraMetadata cameraMetadata(const DetectorOptions& detector);
 
 // Writes planes 0 .. planes-1 (all channels) of `stack`. `description` goes into the OME metadata.
 void writeStackFiles(const StackOutputs& out, const Stack& stack, const Microscope& microscope, int planes,

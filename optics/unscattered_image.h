@@ -5,35 +5,31 @@
 // paths leave out exactly this part (UnscatteredModel::covers, through CameraPathImaging), so the two
 // add up to the full model (docs/model.md, "The computed image").
 //
-// For a point y of the region, dye i and beam line l (side s), the expected photoelectrons are
-//   e = t Ω V · T̄_cam,i(y) · (1/4π) Σ_{l,s} E_ls(y) T_beam,ls(y) σa,i(λ_l; c_i(y)) λ_l Φ_i · D_i,
-//   D_i = ∫ f_i(λ) detection(λ)/λ dλ,
-// spread over the pixels by the dye's polychromatic PSF (t exposure, Ω the cone's solid angle, V the
-// point's volume, T̄_cam the cone-mean transmittance toward the objective, E the unattenuated
-// irradiance, T_beam the transmittance back along the beam to where it entered the sample).
+// It is a linear operator on the concentrations, y = P · diag(g) · S · c, in three pieces that a fit
+// reuses (optics/imaging_operator.h):
+//  - S (optics/emission_lattice.h): the stack's emission points on a support fixed by where the dye is,
+//    their concentrations and their parts by label;
+//  - g (optics/emission_gains.h): per point and dye, photoelectrons per mol/L: sheet irradiance,
+//    transmittances along the beam and toward the objective, σa per molar, Φ and the detected emission;
+//  - P (optics/psf_projector.h): each dye's polychromatic PSF integrated over the pixels, and its adjoint.
+// The dyes' own attenuation makes y non-linear in c; g freezes it at the scene's concentrations.
 //
-// Quadrature, each part with a resolution that its test refines (tests/optics/unscattered_image_test.cpp):
-//  - points: a lattice in the plane's frame, `lateralSamples` per object pixel along x and y and
-//    `axialStepUm` along the axis (midpoint rule over the trilinear concentrations in grid media); in
-//    homogeneous media each segment of a lattice column through the medium by Gauss–Legendre nodes,
-//    with columns refined over shapes smaller than a few lattice steps (beads);
-//  - transmittances: on a lattice of `transmittanceStepUm`, trilinearly interpolated; the cone mean
-//    from `coneRings` × `coneAzimuths` directions (Gauss–Legendre in cos θ, uniform in azimuth), at
-//    four wavelengths across the channel's detected band;
-//  - PSF: per dye the polychromatic PSF over `spectralNodes` quantiles of its detected emission,
-//    integrated over each pixel by n² Gauss–Legendre points (n at least `pixelQuadrature`, and at
-//    least 2k + 3 for a PSF band of k = pixel × 2 NA/λ cycles per pixel: a PSF narrower than the
-//    pixel is otherwise integrated wrongly by up to ±20 % depending on where the point lies), tabulated at
-//    `kernelPhases` sub-pixel positions per axis and at the lattice's axial layers (points between them
-//    are split linearly); within a few pixels of each point (beyond the defocus disc) exactly, beyond
-//    that on the pixel grid by FFT convolution in axial bins of `farBinUm`, with bilinear deposits.
+// For a point y, dye i and beam line l (side s), the expected photoelectrons are
+//   e = t Ω V · T̄_cam,i(y) · (1/4π) Σ_{l,s} E_ls(y) T_beam,ls(y) σa,i(λ_l; c_i(y)) λ_l Φ_i · D_i,
+//   D_i = ∫ f_i(λ) detection(λ)/λ dλ.
+// A model serves a whole stack: S and the transmittances are built once, and a plane evaluates only its
+// sheet's irradiance and the projection (kernels cached across planes).
 #include <atomic>
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <unordered_map>
 #include <vector>
 
+#include "optics/emission_gains.h"
+#include "optics/emission_lattice.h"
 #include "optics/imaging.h"
+#include "optics/psf_projector.h"
 #include "render/fluorescence.h"
 
 namespace fluorosim::optics {
@@ -55,8 +51,8 @@ struct UnscatteredOptions {
 };
 
 // The computed part's emission as a proposal for camera paths that connect to it after scattering
-// (scattered emission): the lattice cells of the plane drawn in proportion to the power they emit into
-// the channel, then a point uniform in the cell. Thread-safe once built.
+// (scattered emission): the lattice cells of the plane drawn in proportion to the power they send to the
+// camera, then a point uniform in the cell. Thread-safe once built.
 class EmissionPoints {
 public:
     struct Sample {
@@ -67,7 +63,8 @@ public:
     Sample sample(double uCell, double ux, double uy, double uz) const;
     double pdf(const Vec3& p) const;  // 0 outside the cells
 
-    // Built by computeUnscatteredImage: cells of the lattice (i, j, layer) with their power.
+    // Cells of the plane's lattice (i, j, layer) with their power; (x0, yTop, z0) the lattice's corner in
+    // the plane's frame.
     EmissionPoints(const Imaging& plane, double x0, double yTop, double z0, double lateralMm, double axialMm);
     void add(int64_t i, int64_t j, int64_t layer, double power);
     void finish();
@@ -82,35 +79,61 @@ private:
     double total_ = 0;
 };
 
+// Where the computed part's time goes (seconds): the stack's pieces once, then each plane.
+struct UnscatteredTimings {
+    double lattice = 0;        // S: emission points (once per stack)
+    double transmittances = 0; // g's transmittances (once per stack)
+    double gains = 0;          // this plane's sheet irradiance and gains
+    double projection = 0;     // splats and far FFTs, with the kernels built on the way
+    double kernelThreadSeconds = 0;  // of the projection: building P's near kernels (cached after), summed over threads
+};
+
 struct UnscatteredPlane {
     std::vector<double> electrons;  // expected photoelectrons per pixel, row-major from the top
-    uint64_t points = 0;            // emission points of the quadrature
+    uint64_t points = 0;            // emission points lit in this plane
     double seconds = 0;
+    UnscatteredTimings timings;
     bool complete = true;           // false when cancelled
     std::shared_ptr<const EmissionPoints> emission;
 };
 
-// What the computed image of one channel needs, reused for every plane: the emitting dyes as the channel
-// excites and detects them, the region it covers, and the PSF kernels per dye and axial layer (built on
-// first use). Thread-safe after construction.
+// What the computed image of one channel needs, for every plane of a stack: the emitting dyes as the
+// channel excites and detects them, the lattice's geometry, the PSF projector, and (built on first use)
+// S and g. Thread-safe after construction.
 class UnscatteredModel {
 public:
-    // `lights`: the channel's lights (at any plane: only their lines and cores matter here);
-    // `detection(λ)`: photoelectrons per joule at λ (emission path × QE × λ/hc), as the paths weigh
-    // radiance; `plane`: any plane of the stack (its imaging geometry and PSF).
-    UnscatteredModel(const Scene& scene, const std::vector<Light>& lights, const FluorescencePlan& plan, const Imaging& plane,
-                     std::function<double(double)> detection, UnscatteredOptions options = {});
+    // `lights`: the channel's lights at the reference plane (only their lines, directions and cores matter
+    // here); `detection(λ)`: photoelectrons per joule at λ (emission path × QE × λ/hc); `reference`: the
+    // reference plane's imaging (its geometry and PSF); `planeOffsetsMm`: the stack's planes along the
+    // axis from the reference plane (the lattice's axial step divides their spacing when it is uniform);
+    // `labels`: split S by label (for fits).
+    UnscatteredModel(const Scene& scene, const std::vector<Light>& lights, const FluorescencePlan& plan, const Imaging& reference,
+                     std::function<double(double)> detection, UnscatteredOptions options = {}, std::vector<double> planeOffsetsMm = {0.0},
+                     bool labels = false);
     ~UnscatteredModel();
 
     // False when no beam line excites an emitting dye (the image is then zero and covers nothing).
     bool active() const;
     // Whether the computed image of `plane` holds the unscattered fluorescence excited at y (a point
-    // inside a beam's core): y lies in the region of the lattice.
+    // inside a beam's core): y lies in the region of the plane's lattice.
     bool covers(const Imaging& plane, const Vec3& y) const;
     const UnscatteredOptions& options() const;
+    const ChannelDyes& dyes() const;
+    const LatticeGeometry& geometry() const;
+    const PsfProjector& projector() const;
+    // The plane's offset along the axis from the reference plane; ConfigError unless `plane` is the
+    // reference plane moved along the axis to one of the stack's planes.
+    double planeOffset(const Imaging& plane) const;
+
+    // S and g for `scene` (the one the model was built for, or the same scene with other concentrations
+    // for g), built on first use; nullptr when cancelled. The model keeps them.
+    const EmissionLattice* lattice(const Scene& scene, int threads, const std::atomic<bool>* cancel = nullptr) const;
+    const EmissionGains* gains(const Scene& scene, int threads, const std::atomic<bool>* cancel = nullptr) const;
+    // Gains for other concentrations of the same scene (a fit's frozen attenuation), not kept.
+    std::unique_ptr<EmissionGains> gainsFor(const Scene& scene, int threads, const std::atomic<bool>* cancel = nullptr) const;
+    const std::vector<Light>& referenceLights() const;
 
     struct Impl;
-    const Impl& impl() const { return *impl_; }
 
 private:
     std::unique_ptr<Impl> impl_;
@@ -119,5 +142,12 @@ private:
 // The computed unscattered image of `plane` lit by `lights` (the channel's lights at this plane).
 UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<Light>& lights, const Imaging& plane,
                                          const UnscatteredModel& model, int threads = 0, const std::atomic<bool>* cancel = nullptr);
+
+// The emissions of a plane for the projector: each lattice point lit in the plane, per dye, with e = its
+// gain × `concentration(point, slot)`, sent to target 0. With `byLabel`, one emission per label part
+// instead, sent to target `byLabel(key)` (skipped where it returns a negative target).
+std::vector<PointEmission> planeEmissions(const UnscatteredModel& model, const EmissionLattice& lattice, const EmissionGains& gains,
+                                          const std::vector<Light>& lights, double planeOffsetMm, int threads,
+                                          const std::function<int(uint32_t key)>& byLabel = {});
 
 }  // namespace fluorosim::optics

@@ -18,9 +18,9 @@
 #include "optics/acquisition.h"
 #include "render/fluorescence.h"
 #include "render/renderer.h"
-#include "acquire_request.h"
-#include "scene_files.h"
-#include "voxelize_files.h"
+#include "optics/acquire_request.h"
+#include "optics/scene_files.h"
+#include "optics/voxelize_request.h"
 
 namespace py = pybind11;
 namespace fs = std::filesystem;
@@ -45,7 +45,7 @@ Scene loadAnyScene(const py::object& scene, const std::optional<std::string>& ba
             [&db](const std::string& name, std::optional<double> ec, std::optional<double> qy) { return db.fluorophore(name, ec, qy); },
             [](const LightSheetSpec& spec) { return optics::makeLightSheet(spec); });
     }
-    return app::loadSceneFile(py::str(scene).cast<std::string>(), db);
+    return optics::loadSceneFile(py::str(scene).cast<std::string>(), db);
 }
 
 template <typename T>
@@ -98,7 +98,7 @@ py::dict renderScene(const py::object& sceneArg, std::optional<int> spp, std::op
 py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, const std::optional<std::string>& step, std::optional<int> spp,
                  std::optional<int64_t> seed, const std::vector<std::string>& channels, int threads, const std::optional<std::string>& base,
                  const std::string& estimator, std::optional<int> directSpp, std::optional<double> noiseRatio, std::optional<int> maxSpp) {
-    app::AcquireRequest request;
+    optics::AcquireRequest request;
     request.planes = planes;
     request.step = step;
     request.spp = spp;
@@ -110,10 +110,10 @@ py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, con
                           "the scattered light");
     request.noiseRatio = noiseRatio;
     request.maxSpp = maxSpp;
-    app::checkAcquireRequest(request);
+    optics::checkAcquireRequest(request);
     const Scene scene = loadAnyScene(sceneArg, base);
     optics::Microscope m = optics::Microscope::fromScene(scene, database());
-    const optics::AcquireOptions o = app::applyAcquireRequest(request, scene, m);
+    const optics::AcquireOptions o = optics::applyAcquireRequest(request, scene, m);
     const std::vector<size_t> selected = m.selectChannels(channels, "--channels");
     optics::Stack stack = optics::emptyStack(m, selected);
     {
@@ -175,7 +175,7 @@ py::array_t<double> filterTransmission(const std::string& name, const std::vecto
 py::dict voxelizeSwc(const std::vector<std::string>& swc, const std::string& voxel, const std::vector<std::string>& dyes,
                      const std::vector<std::string>& concentrations, const std::string& output, const std::vector<std::string>& grids,
                      const std::string& mode, const std::optional<std::string>& membraneThickness, int supersampling, int threads) {
-    app::VoxelizeArgs a;
+    optics::VoxelizeArgs a;
     a.swc = swc;
     a.voxel = voxel;
     a.dyes = dyes;
@@ -190,7 +190,7 @@ py::dict voxelizeSwc(const std::vector<std::string>& swc, const std::string& vox
     VoxelizeSummary s;
     {
         py::gil_scoped_release release;
-        s = app::voxelizeFiles(a, database(), nullptr);
+        s = optics::voxelizeFiles(a, database(), nullptr);
     }
     py::list gridList;
     for (const VoxelizedGridSummary& g : s.grids) {

@@ -6,6 +6,8 @@ packages=(
   libtbb-dev libopenvdb-dev libboost-iostreams-dev libboost-dev
   libembree-dev libopenexr-dev libimath-dev libpng-dev libtiff-dev libassimp-dev
   libcli11-dev nlohmann-json3-dev libgtest-dev libbenchmark-dev libfftw3-dev
+  # The concentration fit (optics/fit): Ceres Solver 2.1 and the Eigen it is built on.
+  libceres-dev libeigen3-dev
   # The viewer (FLUOROSIM_WITH_VIEWER, docs/viewer.md): VTK 9.1 and X11 headers; its tests render
   # under a virtual X server (xvfb-run needs xauth) through Mesa's llvmpipe (libgl1-mesa-dri).
   libvtk9-dev libx11-dev xvfb xauth libgl1-mesa-dri

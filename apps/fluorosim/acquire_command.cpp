@@ -18,13 +18,13 @@
 #include "core/errors.h"
 #include "core/math.h"
 #include "core/units.h"
-#include "acquire_request.h"
+#include "optics/acquire_request.h"
 #include "distributed_acquire.h"
 #include "optics/acquisition.h"
 #include "optics/stack_files.h"
-#include "output_checks.h"
+#include "core/output_checks.h"
 #include "progress.h"
-#include "scene_files.h"
+#include "optics/scene_files.h"
 
 namespace fluorosim::app {
 namespace fs = std::filesystem;
@@ -33,7 +33,7 @@ namespace {
 std::atomic<bool> gCancel{false};
 extern "C" void onAcquireSignal(int) { gCancel.store(true); }
 
-struct AcquireArgs : AcquireRequest {
+struct AcquireArgs : optics::AcquireRequest {
     std::string scene, output;
     bool resume = false;
 };
@@ -61,15 +61,15 @@ double median(std::vector<double> v) {
 }
 
 void runAcquire(const AcquireArgs& a) {
-    checkAcquireRequest(a);
+    optics::checkAcquireRequest(a);
     const spectra::Database db;
-    const Scene scene = loadSceneFile(a.scene, db);
+    const Scene scene = optics::loadSceneFile(a.scene, db);
     if (cluster::isRoot())  // under MPI every rank loads the scene; one of them speaks
         for (const std::string& w : scene.warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
     optics::Microscope m = optics::Microscope::fromScene(scene, db);
     if (cluster::isRoot())
         for (const std::string& w : m.warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
-    optics::AcquireOptions o = applyAcquireRequest(a, scene, m);
+    optics::AcquireOptions o = optics::applyAcquireRequest(a, scene, m);
     o.cancel = &gCancel;
 
     const std::vector<size_t> selected = m.selectChannels(a.channels, "--channels");
@@ -107,6 +107,7 @@ void runAcquire(const AcquireArgs& a) {
     std::vector<double> pathRel;       // relative standard errors over the brightest pixels
     std::vector<double> mcOverCamera;  // MC variance over the camera's noise variance, brightest pixels
     uint64_t pathSamples = 0, pilotSamples = 0, pixels = 0, computedPoints = 0, nonFinite = 0;
+    optics::UnscatteredTimings computedTimings;  // summed over planes
     const double darkElectrons = m.detector.darkCurrentElectronsPerS * m.detector.exposureS;
     cb.planeDone = [&](size_t slot, int plane, const optics::PlaneImage& image) {
         checkpoint->append(slot, plane, image);
@@ -120,6 +121,11 @@ void runAcquire(const AcquireArgs& a) {
         computedSeconds += image.computedSeconds;
         pathSeconds += image.pathSeconds;
         computedPoints += image.computedPoints;
+        computedTimings.lattice += image.computedTimings.lattice;
+        computedTimings.transmittances += image.computedTimings.transmittances;
+        computedTimings.gains += image.computedTimings.gains;
+        computedTimings.projection += image.computedTimings.projection;
+        computedTimings.kernelThreadSeconds += image.computedTimings.kernelThreadSeconds;
         nonFinite += image.nonFiniteSamples;
         pathSamples += image.pathSamples;
         pilotSamples += image.pilotSamples;
@@ -179,6 +185,14 @@ void runAcquire(const AcquireArgs& a) {
                                     {"pooled_electrons_fraction", pooledSum / std::max(1e-300, computedSum + pathSum)},
                                     {"computed_seconds", computedSeconds},
                                     {"computed_points", computedPoints},
+                                    // Where the computed part's time went: S and the transmittances once per
+                                    // channel, then per plane the sheet's gains and the projection.
+                                    {"computed_timings",
+                                     {{"lattice_seconds", computedTimings.lattice},
+                                      {"transmittance_seconds", computedTimings.transmittances},
+                                      {"gain_seconds", computedTimings.gains},
+                                      {"projection_seconds", computedTimings.projection},
+                                      {"kernel_thread_seconds", computedTimings.kernelThreadSeconds}}},
                                     {"path_thread_seconds", pathSeconds},
                                     {"median_relative_stderr_top10", median(pathRel)},
                                     {"non_finite_samples", nonFinite},

@@ -14,6 +14,8 @@ void addRenderCommand(CLI::App& app);
 void addAcquireCommand(CLI::App& app);
 void addValidateCommands(CLI::App& app);
 void addVoxelizeCommand(CLI::App& app);
+// `fit` and `gradient`: concentrations from an observed stack, and the model's Jacobian.
+void addFitCommands(CLI::App& app);
 // `validate emission` and `validate sweep`, under the `validate` command.
 void addFluorescenceValidations(CLI::App& validate);
 // `validate lightsheet`.

@@ -27,6 +27,7 @@ struct PlaneHeader {
     double computedElectrons, pathElectrons, pooledElectrons, computedSeconds, pathSeconds;
     uint64_t computedPoints, pathSamples, pilotSamples, nonFiniteSamples;
     PathStats stats;
+    optics::UnscatteredTimings computedTimings;
 };
 static_assert(std::is_trivially_copyable_v<PlaneHeader>);
 
@@ -37,7 +38,7 @@ std::string encodePlane(const optics::PlaneImage& image) {
     const PlaneHeader h{image.width,          image.height,        image.complete,         image.seconds,
                         image.largestSample,  image.largestSampleOverPixel,               image.computedElectrons,
                         image.pathElectrons,  image.pooledElectrons, image.computedSeconds, image.pathSeconds,   image.computedPoints,
-                        image.pathSamples,    image.pilotSamples,  image.nonFiniteSamples, image.stats};
+                        image.pathSamples,    image.pilotSamples,  image.nonFiniteSamples, image.stats,       image.computedTimings};
     const size_t pixels = image.electrons.size();
     std::string bytes(sizeof h + kPlaneArrays * pixels * sizeof(double), '\0');
     std::memcpy(bytes.data(), &h, sizeof h);
@@ -71,6 +72,7 @@ optics::PlaneImage decodePlane(std::string_view bytes) {
     image.pilotSamples = h.pilotSamples;
     image.nonFiniteSamples = h.nonFiniteSamples;
     image.stats = h.stats;
+    image.computedTimings = h.computedTimings;
     for (size_t k = 0; k < kPlaneArrays; ++k) {
         std::vector<double>& v = image.*kArrays[k];
         v.resize(pixels);

@@ -107,6 +107,7 @@ int run(int argc, char** argv) {
     app::addAcquireCommand(app);
     app::addValidateCommands(app);
     app::addVoxelizeCommand(app);
+    app::addFitCommands(app);
 #ifdef FLUOROSIM_WITH_VIEWER
     app::addViewCommand(app);
 #endif

@@ -18,9 +18,9 @@
 #include "database.h"
 #include "distributed_render.h"
 #include "io/image_io.h"
-#include "output_checks.h"
+#include "core/output_checks.h"
 #include "progress.h"
-#include "scene_files.h"
+#include "optics/scene_files.h"
 #include "render/checkpoint.h"
 #include "render/renderer.h"
 #include "scene/scene_loader.h"
@@ -111,7 +111,7 @@ void runRender(const RenderArgs& a) {
         throw IoError(ckptPath.string() + ": no checkpoint to resume (it is written next to the output while a render runs; "
                                           "run without --resume to start afresh)");
     const spectra::Database db;
-    Scene scene = loadSceneFile(a.scene, db);
+    Scene scene = optics::loadSceneFile(a.scene, db);
     if (cluster::isRoot())
         for (const std::string& w : scene.warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
     if (a.seed) scene.render.seed = *a.seed;

@@ -13,7 +13,7 @@
 
 #include "cli_checks.h"
 #include "commands.h"
-#include "output_checks.h"
+#include "core/output_checks.h"
 #include "core/errors.h"
 #include "core/message.h"
 #include "core/parallel.h"

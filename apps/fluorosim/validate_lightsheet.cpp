@@ -16,7 +16,7 @@
 #include "core/units.h"
 #include "core/math.h"
 #include "database.h"
-#include "output_checks.h"
+#include "core/output_checks.h"
 #include "optics/light_sheet.h"
 #include "render/path_tracer.h"
 #include "scene/light_sampler.h"

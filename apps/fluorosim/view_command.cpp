@@ -7,7 +7,7 @@
 
 #include "commands.h"
 #include "core/errors.h"
-#include "output_checks.h"
+#include "core/output_checks.h"
 #include "viewer/viewer.h"
 
 namespace fluorosim::app {

@@ -8,7 +8,7 @@
 #include "database.h"
 #include "progress.h"
 #include "volume/voxelize.h"
-#include "voxelize_files.h"
+#include "optics/voxelize_request.h"
 
 namespace fluorosim::app {
 namespace fs = std::filesystem;
@@ -21,7 +21,7 @@ std::string percent(double covered, double analytic) {
     return buf;
 }
 
-void runVoxelize(const VoxelizeArgs& a) {
+void runVoxelize(const optics::VoxelizeArgs& a) {
     const size_t files = a.swc.size();
     const spectra::Database db;
     // The bar appears only for runs longer than a second.
@@ -33,7 +33,7 @@ void runVoxelize(const VoxelizeArgs& a) {
         bar->update(f);
     };
     VoxelizeOptions opt;
-    const VoxelizeSummary s = voxelizeFiles(a, db, progress, &opt);
+    const VoxelizeSummary s = optics::voxelizeFiles(a, db, progress, &opt);
     if (bar) bar->finish();
 
     const bool filled = opt.mode == LabelMode::Filled;
@@ -59,7 +59,7 @@ void runVoxelize(const VoxelizeArgs& a) {
 }  // namespace
 
 void addVoxelizeCommand(CLI::App& app) {
-    auto args = std::make_shared<VoxelizeArgs>();
+    auto args = std::make_shared<optics::VoxelizeArgs>();
     CLI::App* cmd = app.add_subcommand("voxelize", "Turn SWC neuron morphologies into OpenVDB dye-concentration grids");
     cmd->add_option("swc", args->swc, "SWC files (NeuroMorpho.Org format, µm)")->required();
     cmd->add_option("--voxel", args->voxel, "Voxel size with a unit, e.g. 0.5um")->required();

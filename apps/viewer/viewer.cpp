@@ -13,7 +13,7 @@
 #include <cstdio>
 #include <sstream>
 
-#include "fluorosim/scene_files.h"
+#include "optics/scene_files.h"
 #include "viewer/image_compare.h"
 #include "viewer/viewer_impl.h"
 
@@ -137,7 +137,7 @@ Viewer::Impl::~Impl() = default;
 
 void Viewer::Impl::loadData() {
     if (!options.scene.empty()) {
-        scene.emplace(app::loadSceneFile(options.scene, db));
+        scene.emplace(optics::loadSceneFile(options.scene, db));
         for (const std::string& w : scene->warnings) warnings.push_back(w);
         if (scene->microscope) microscope.emplace(optics::Microscope::fromScene(*scene, db));
         specimen = loadSpecimen(*scene, options.scene, {options.swc, options.findSwc});

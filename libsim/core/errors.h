@@ -20,5 +20,9 @@ struct IoError : Error {
 struct NumericError : Error {
     using Error::Error;
 };
+// Work stopped because the caller's cancel flag was set (Ctrl-C); what finished is the caller's to keep.
+struct Cancelled : Error {
+    using Error::Error;
+};
 
 }  // namespace fluorosim

@@ -56,6 +56,10 @@ Medium::Medium(std::string name, Spectrum sigmaA, Spectrum sigmaS, double g, dou
     vacuum_ = !anything;
 }
 
+Medium Medium::withVolume(std::shared_ptr<const VolumeFields> volume) const {
+    return Medium(name_, sigmaA_, sigmaS_, phase_.g(), ior_, dyes_, std::move(volume));
+}
+
 MediumSpectra Medium::spectra(const SampledWavelengths& wl) const {
     MediumSpectra s;
     s.channels = channelCount();

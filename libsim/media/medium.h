@@ -94,6 +94,8 @@ public:
     Medium(std::string name, Spectrum sigmaA, Spectrum sigmaS, double g, double ior, std::vector<DyeComponent> dyes = {},
            std::shared_ptr<const VolumeFields> volume = nullptr);
     const std::vector<DyeComponent>& dyes() const { return dyes_; }
+    // The same medium over other fields (same channels), e.g. dye grids rescaled by a fit.
+    Medium withVolume(std::shared_ptr<const VolumeFields> volume) const;
 
     const std::string& name() const { return name_; }
     const Spectrum& solventAbsorption() const { return sigmaA_; }

@@ -520,7 +520,8 @@ private:
             if (!reference) reference = c.grid;
             c.scale = gridConcentrationScale(*dyes[i].entryNode, *c.grid);
         }
-        if (v.has("label_grid")) (void)readGrid(v.at("label_grid"), true);  // checked now; kept for tools, not transport
+        std::optional<DensityGrid> labels;  // kept for fits and tools; transport never reads it
+        if (v.has("label_grid")) labels = readGrid(v.at("label_grid"), true);
         if (!reference) v.fail("the volume names no grid (give a dye \"grid\", \"scattering_grid\" or \"absorption_grid\")");
         // Length unit of the file's coordinates: the scene's word first, then the file's metadata.
         std::string unit = v.has("length_unit") ? v.at("length_unit").str() : reference->metadata().lengthUnit;
@@ -535,7 +536,7 @@ private:
         Affine worldFromFile = Affine::scaling(*unitScaleMm * scale);
         if (v.has("translate")) worldFromFile = worldFromFile.then(Affine::translation(v.at("translate").vec3(Dimension::Length)));
         try {
-            return std::make_shared<const VolumeFields>(std::move(channels), worldFromFile, interpolation, majorants);
+            return std::make_shared<const VolumeFields>(std::move(channels), worldFromFile, interpolation, majorants, std::move(labels));
         } catch (const ConfigError& e) {
             v.failQuoted(e.what());
         }

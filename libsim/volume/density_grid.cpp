@@ -11,6 +11,7 @@
 #include <stdexcept>
 #include <mutex>
 #include <sstream>
+#include <unordered_set>
 #include <vector>
 
 #include "core/errors.h"
@@ -348,6 +349,112 @@ void writeVoxelGrids(const std::string& file, const Affine& worldFromIndex, cons
         auto acc = labels->getAccessor();
         for (auto it = grid->cbeginValueOn(); it; ++it) acc.setValue(it.getCoord(), static_cast<int32_t>(*it));
         out.push_back(labels);
+    }
+    try {
+        openvdb::io::File(file).write(out);
+    } catch (const openvdb::Exception& e) {
+        throw IoError(file + ": cannot write: " + e.what());
+    }
+}
+
+DensityGrid DensityGrid::scaled(const std::function<double(int, int, int)>& factor) const {
+    const Impl& src = *impl_;
+    auto impl = std::make_shared<Impl>();
+    impl->name = src.name;
+    impl->file = src.file;
+    impl->worldFromIndex = src.worldFromIndex;
+    impl->metadata = src.metadata;
+    impl->background = src.background;
+    impl->maxValue = src.background;
+    impl->voxels = SparseVoxels(static_cast<float>(src.background));
+    const std::string where = "grid \"" + src.name + "\" (scaled)";
+    // Every block and tile of the source, cut into 8³ blocks; a block is visited once even where a
+    // tile's box covers it too.
+    std::unordered_set<uint64_t> done;
+    auto key = [](int64_t x, int64_t y, int64_t z) {
+        return (static_cast<uint64_t>(x + (1 << 20)) << 42) | (static_cast<uint64_t>(y + (1 << 20)) << 21) | static_cast<uint64_t>(z + (1 << 20));
+    };
+    std::array<float, SparseVoxels::kBlockVoxels> values{}, copied{};
+    for (const auto& [box, unused] : src.blocks) {
+        (void)unused;
+        for (int32_t bz = box.lo[2] & ~7; bz <= box.hi[2]; bz += 8)
+            for (int32_t by = box.lo[1] & ~7; by <= box.hi[1]; by += 8)
+                for (int32_t bx = box.lo[0] & ~7; bx <= box.hi[0]; bx += 8) {
+                    if (!done.insert(key(bx >> 3, by >> 3, bz >> 3)).second) continue;
+                    const IndexBox b{{bx, by, bz}, {bx + 7, by + 7, bz + 7}};
+                    src.voxels.copyBox(b, copied.data());
+                    float mx = 0;
+                    bool any = false;
+                    for (int z = 0; z < 8; ++z)
+                        for (int y = 0; y < 8; ++y)
+                            for (int x = 0; x < 8; ++x) {
+                                const float v = copied[static_cast<size_t>((z * 8 + y) * 8 + x)];
+                                float out = v;
+                                if (v != static_cast<float>(src.background)) {
+                                    const double f = factor(bx + x, by + y, bz + z);
+                                    if (!(f >= 0) || !std::isfinite(f))
+                                        throw ConfigError(where + ": factor " + std::to_string(f) + " at voxel (" + std::to_string(bx + x) + ", " +
+                                                          std::to_string(by + y) + ", " + std::to_string(bz + z) + ") must be finite and >= 0");
+                                    out = static_cast<float>(v * f);
+                                    any = true;
+                                }
+                                values[static_cast<size_t>(64 * x + 8 * y + z)] = out;
+                                mx = std::max(mx, out);
+                            }
+                    if (!any) continue;
+                    impl->voxels.addBlock({bx, by, bz}, values.data(), where);
+                    impl->maxValue = std::max(impl->maxValue, double(mx));
+                    if (mx > impl->background) {
+                        impl->blocks.push_back({b, mx});
+                        if (impl->bounds.empty()) impl->bounds = b;
+                        for (int a = 0; a < 3; ++a) {
+                            impl->bounds.lo[a] = std::min(impl->bounds.lo[a], b.lo[a]);
+                            impl->bounds.hi[a] = std::max(impl->bounds.hi[a], b.hi[a]);
+                        }
+                    }
+                }
+    }
+    impl->voxels.finish();
+    impl->activeVoxels = impl->voxels.storedVoxelCount();
+    return DensityGrid(std::move(impl));
+}
+
+void writeDensityGrids(const std::string& file, const std::vector<GridToWrite>& grids) {
+    initializeOpenVdb();
+    openvdb::GridPtrVec out;
+    for (const GridToWrite& g : grids) {
+        const DensityGrid::Impl& src = *g.grid->impl();
+        openvdb::Mat4d M = openvdb::Mat4d::identity();
+        for (int i = 0; i < 3; ++i) {
+            for (int j = 0; j < 3; ++j) M(j, i) = src.worldFromIndex.m[i][j];
+            M(3, i) = src.worldFromIndex.t[i];
+        }
+        auto write = [&](auto grid) {
+            grid->setName(g.name);
+            grid->setTransform(openvdb::math::Transform::createLinearTransform(M));
+            if (!src.metadata.units.empty()) grid->insertMeta("units", openvdb::StringMetadata(src.metadata.units));
+            if (!src.metadata.lengthUnit.empty()) grid->insertMeta("length_unit", openvdb::StringMetadata(src.metadata.lengthUnit));
+            auto acc = grid->getAccessor();
+            std::array<float, SparseVoxels::kBlockVoxels> v{};
+            for (const auto& [box, unused] : src.blocks) {
+                (void)unused;
+                for (int32_t bz = box.lo[2] & ~7; bz <= box.hi[2]; bz += 8)
+                    for (int32_t by = box.lo[1] & ~7; by <= box.hi[1]; by += 8)
+                        for (int32_t bx = box.lo[0] & ~7; bx <= box.hi[0]; bx += 8) {
+                            src.voxels.copyBox({{bx, by, bz}, {bx + 7, by + 7, bz + 7}}, v.data());
+                            for (int z = 0; z < 8; ++z)
+                                for (int y = 0; y < 8; ++y)
+                                    for (int x = 0; x < 8; ++x) {
+                                        const float value = v[static_cast<size_t>((z * 8 + y) * 8 + x)];
+                                        if (value != static_cast<float>(src.background))
+                                            acc.setValue(openvdb::Coord(bx + x, by + y, bz + z), static_cast<typename decltype(grid)::element_type::ValueType>(value));
+                                    }
+                        }
+            }
+            out.push_back(grid);
+        };
+        if (g.integers) write(openvdb::Int32Grid::create(static_cast<int32_t>(src.background)));
+        else write(openvdb::FloatGrid::create(static_cast<float>(src.background)));
     }
     try {
         openvdb::io::File(file).write(out);

@@ -53,6 +53,11 @@ public:
     static DensityGrid fromVoxels(const std::string& name, const IndexBox& box, const Affine& worldFromIndex,
                                   const std::function<double(int, int, int)>& value, GridMetadata metadata = {});
 
+    // A copy whose stored voxels are multiplied by factor(i, j, k) >= 0 (the background is kept): a dye
+    // grid rescaled by label or by a coarse basis, for transmittances at fitted concentrations. Tiles
+    // become voxel blocks. Throws ConfigError for a negative or non-finite factor.
+    DensityGrid scaled(const std::function<double(int, int, int)>& factor) const;
+
     // Value at a continuous index-space position.
     double value(const Vec3& indexPos, Interpolation interpolation) const;
     // The voxel values of `box` (x fastest, then y, then z) into `out`, which holds the box's voxel count.
@@ -72,6 +77,7 @@ public:
 
     struct Impl;  // opaque: holds the voxel store
     explicit DensityGrid(std::shared_ptr<const Impl> impl) : impl_(std::move(impl)) {}
+    const Impl* impl() const { return impl_.get(); }
 
 private:
     std::shared_ptr<const Impl> impl_;
@@ -93,5 +99,14 @@ struct VoxelGridSpec {
     bool integers = false;  // an Int32 grid (labels) instead of a float grid
 };
 void writeVoxelGrids(const std::string& file, const Affine& worldFromIndex, const std::vector<VoxelGridSpec>& grids);
+
+// Writes grids held in memory (their stored voxels, transform and metadata) into one OpenVDB file under
+// the names given: float grids, or Int32 with `integers` (labels). Throws IoError naming the file.
+struct GridToWrite {
+    std::string name;
+    const DensityGrid* grid = nullptr;
+    bool integers = false;
+};
+void writeDensityGrids(const std::string& file, const std::vector<GridToWrite>& grids);
 
 }  // namespace fluorosim

@@ -35,8 +35,9 @@ void MajorantGridOptions::validate() const {
 }
 
 VolumeFields::VolumeFields(std::vector<VolumeChannel> channels, const Affine& worldFromFile, Interpolation interpolation,
-                           MajorantGridOptions majorants)
-    : channels_(std::move(channels)), interpolation_(interpolation) {
+                           MajorantGridOptions majorants, std::optional<DensityGrid> labels)
+    : channels_(std::move(channels)), labels_(std::move(labels)), worldFromFile_(worldFromFile), majorantOptions_(majorants),
+      interpolation_(interpolation) {
     majorants.validate();
     const DensityGrid* first = nullptr;
     IndexBox bounds;
@@ -57,6 +58,9 @@ VolumeFields::VolumeFields(std::vector<VolumeChannel> channels, const Affine& wo
             bounds.hi[a] = std::max(bounds.hi[a], b.hi[a]);
         }
     }
+    if (labels_ && first && !sameTransform(first->worldFromIndex(), labels_->worldFromIndex()))
+        throw ConfigError(labels_->file() + ": label grid \"" + labels_->name() + "\" has a different transform from grid \"" + first->name() +
+                          "\"; labels must share the dye grids' voxels");
     worldFromIndex_ = (first ? first->worldFromIndex() : Affine()).then(worldFromFile);
     indexFromWorld_ = worldFromIndex_.inverse();
     if (bounds.empty()) return;  // no voxel differs from the background: the outside values hold everywhere
@@ -135,6 +139,14 @@ double VolumeFields::voxelSizeMm() const {
     double shortest = std::numeric_limits<double>::infinity();
     for (int a = 0; a < 3; ++a) shortest = std::min(shortest, length(worldFromIndex_.applyLinear(Vec3(a == 0, a == 1, a == 2))));
     return shortest;
+}
+
+std::shared_ptr<const VolumeFields> VolumeFields::scaled(const std::function<double(int, int, int, int)>& factor) const {
+    std::vector<VolumeChannel> channels = channels_;
+    for (size_t c = 0; c < channels.size(); ++c)
+        if (channels[c].grid)
+            channels[c].grid = channels[c].grid->scaled([&](int i, int j, int k) { return factor(static_cast<int>(c), i, j, k); });
+    return std::make_shared<const VolumeFields>(std::move(channels), worldFromFile_, interpolation_, majorantOptions_, labels_);
 }
 
 std::vector<double> VolumeFields::channelMaxima() const {

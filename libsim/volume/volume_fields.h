@@ -3,6 +3,8 @@
 // absorption scales), each value_c(p) = offset_c + scale_c * grid_c(p), and their majorant grid: coarse
 // cells, each holding every channel's maximum over the cell, traversed along a ray by a 3-D DDA
 // (Amanatides and Woo) so that empty and dim space costs one segment per cell.
+#include <functional>
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -34,8 +36,15 @@ class VolumeFields {
 public:
     // Grids must share one index space (same transform in their file). `worldFromFile` maps the files'
     // coordinates (already in mm) into the scene. Throws ConfigError.
+    // `labels`, if given, is an integer grid in the same index space: which labelled object (a neuron)
+    // each voxel belongs to, 0 for none. Transport never reads it; fits parametrise by it.
     VolumeFields(std::vector<VolumeChannel> channels, const Affine& worldFromFile, Interpolation interpolation,
-                 MajorantGridOptions majorants = {});
+                 MajorantGridOptions majorants = {}, std::optional<DensityGrid> labels = std::nullopt);
+
+    // The same fields with every grid channel's stored voxels multiplied by factor(channel, i, j, k)
+    // (DensityGrid::scaled), the labels and transform kept: concentrations rescaled by a fit.
+    std::shared_ptr<const VolumeFields> scaled(const std::function<double(int channel, int i, int j, int k)>& factor) const;
+    const DensityGrid* labels() const { return labels_ ? &*labels_ : nullptr; }
 
     int channelCount() const { return static_cast<int>(channels_.size()); }
     const VolumeChannel& channel(int c) const { return channels_.at(static_cast<size_t>(c)); }
@@ -76,6 +85,9 @@ private:
     }
 
     std::vector<VolumeChannel> channels_;
+    std::optional<DensityGrid> labels_;
+    Affine worldFromFile_;
+    MajorantGridOptions majorantOptions_;
     Interpolation interpolation_;
     Affine worldFromIndex_, indexFromWorld_;
     Vec3 domainLo_, domainHi_;      // index space

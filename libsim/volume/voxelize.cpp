@@ -323,7 +323,7 @@ void addToLabels(BlockMap<LabelBlock>& labels, const BlockResult& r, int32_t lab
     }
     for (int n = 0; n < kBlockVoxels; ++n) {
         const float c = r.full ? 1.0f : (*r.values)[n];
-        if (c >= 0.5f && c > (*b.best)[n]) (*b.label)[n] = label, (*b.best)[n] = c;
+        if (c > 0 && c > (*b.best)[n]) (*b.label)[n] = label, (*b.best)[n] = c;
     }
 }
 

@@ -80,8 +80,10 @@ struct VoxelizeSummary {
 // bad options or inputs, or a grid that would be too large for the voxel size.
 VoxelizeSummary voxelizeNeurons(const std::vector<NeuronVolumeInput>& neurons, const VoxelizeOptions& options);
 
-// Voxelizes and writes one float grid per grid name plus an Int32 grid "label" (the neuron's label
-// where its coverage is >= 0.5; where neurons overlap, the one covering more, the first on ties).
+// Voxelizes and writes one float grid per grid name plus an Int32 grid "label": every voxel a neuron
+// covers at all holds its label (where neurons overlap, the one covering more, the first on ties), so
+// that each voxel's dye is attributed to one neuron (fits parametrise by label). A mask of the neuron
+// itself is its label where the concentration is at least half its value.
 // Throws as voxelizeNeurons, and IoError when the file cannot be written.
 VoxelizeSummary writeVoxelizedVdb(const std::string& path, const std::vector<NeuronVolumeInput>& neurons,
                                   const VoxelizeOptions& options);

@@ -2,7 +2,7 @@
 // geometry, OME-XML, the ground truth on the detector grid with its fit, SWC placement, spectral EXR.
 #include <gtest/gtest.h>
 
-#include "fluorosim/scene_files.h"
+#include "optics/scene_files.h"
 #include "io/image_io.h"
 #include "support/fluorescent_scenes.h"
 #include "viewer/microscope_overlay.h"
@@ -21,7 +21,7 @@ struct Loaded {
 };
 
 Loaded load(const ViewerScene& s, viewer::SpecimenOptions options = {{}, false}) {
-    Scene scene = app::loadSceneFile(s.path(), database());
+    Scene scene = optics::loadSceneFile(s.path(), database());
     optics::Microscope m = optics::Microscope::fromScene(scene, database());
     viewer::Specimen sp = viewer::loadSpecimen(scene, s.path(), options);
     return {std::move(scene), std::move(m), std::move(sp)};

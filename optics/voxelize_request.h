@@ -14,10 +14,10 @@
 #include "core/units.h"
 #include "database.h"
 #include "morphology/swc.h"
-#include "output_checks.h"
+#include "core/output_checks.h"
 #include "volume/voxelize.h"
 
-namespace fluorosim::app {
+namespace fluorosim::optics {
 
 struct VoxelizeArgs {
     std::vector<std::string> swc, dyes, concentrations, grids;
@@ -119,4 +119,4 @@ inline VoxelizeSummary voxelizeFiles(const VoxelizeArgs& a, const spectra::Datab
     return writeVoxelizedVdb(a.output, neurons, opt);
 }
 
-}  // namespace fluorosim::app
+}  // namespace fluorosim::optics

@@ -14,7 +14,7 @@
 #include "optics/acquisition.h"
 #include "optics/microscope.h"
 
-namespace fluorosim::app {
+namespace fluorosim::optics {
 
 struct AcquireRequest {
     std::optional<int> planes, spp, maxSpp;
@@ -34,7 +34,7 @@ inline void checkAcquireRequest(const AcquireRequest& a) {
 
 // Applies the stack overrides (planes, step) to `m`, validates it against the scene, and returns the
 // acquisition options. Throws ConfigError naming the option and its value.
-inline optics::AcquireOptions applyAcquireRequest(const AcquireRequest& a, const Scene& scene, optics::Microscope& m) {
+inline AcquireOptions applyAcquireRequest(const AcquireRequest& a, const Scene& scene, Microscope& m) {
     checkAcquireRequest(a);
     if (a.planes) {
         if (*a.planes < 1 || *a.planes > 4096) throw ConfigError("--planes: must lie in [1, 4096], got " + std::to_string(*a.planes));
@@ -44,11 +44,11 @@ inline optics::AcquireOptions applyAcquireRequest(const AcquireRequest& a, const
     if (!(m.stack.stepMm > 0)) throw ConfigError("--step: must be positive, got " + a.step.value_or(""));
     m.validate(scene);
 
-    optics::AcquireOptions o;
+    AcquireOptions o;
     o.spp = a.spp.value_or(scene.render.spp);
     if (o.spp < 1 || o.spp > (1 << 24)) throw ConfigError("--spp: must lie in [1, 16777216], got " + std::to_string(o.spp));
     o.seed = a.seed ? static_cast<uint64_t>(*a.seed) : scene.render.seed;
-    const auto estimator = optics::estimatorFromName(a.estimator);
+    const auto estimator = estimatorFromName(a.estimator);
     if (!estimator) throw ConfigError("--estimator: expected \"split\" or \"path\", got \"" + a.estimator + "\"");
     o.estimator = *estimator;
     if (a.noiseRatio) {
@@ -67,4 +67,4 @@ inline optics::AcquireOptions applyAcquireRequest(const AcquireRequest& a, const
     return o;
 }
 
-}  // namespace fluorosim::app
+}  // namespace fluorosim::optics

@@ -8,7 +8,7 @@
 
 #include "core/errors.h"
 
-namespace fluorosim::app {
+namespace fluorosim {
 
 // Throws IoError naming `out` when its folder is missing or cannot be written (probed with a file).
 inline void requireWritableFolder(const std::filesystem::path& out) {
@@ -23,4 +23,4 @@ inline void requireWritableFolder(const std::filesystem::path& out) {
     fs::remove(probe);
 }
 
-}  // namespace fluorosim::app
+}  // namespace fluorosim

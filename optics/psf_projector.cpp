@@ -1,0 +1,368 @@
+#include "optics/psf_projector.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <mutex>
+#include <numeric>
+
+#include "core/errors.h"
+#include "core/parallel.h"
+#include "core/quadrature.h"
+#include "optics/fft_convolution.h"
+
+namespace fluorosim::optics {
+namespace {
+
+constexpr double kUmPerMm = 1e3;
+
+int64_t floorDiv(int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+
+double smoothStep01(double t) {
+    t = std::clamp(t, 0.0, 1.0);
+    return t * t * (3 - 2 * t);
+}
+
+// A position on a lattice of phases or layers: snapped to the node within round-off, so that a point
+// on a node is split into one piece, not into a node and a neighbour of weight 1e-12.
+double snapped(double x) {
+    const double r = std::round(x);
+    return std::abs(x - r) < 1e-7 ? r : x;
+}
+
+// A radial function tabulated on [0, rMax] at step dr, linearly interpolated, zero beyond.
+struct RadialTable {
+    double dr = 0;
+    std::vector<double> v;
+    template <class F>
+    RadialTable(double rMax, double step, F&& f) : dr(step) {
+        const size_t n = static_cast<size_t>(std::ceil(rMax / step)) + 2;
+        v.resize(n);
+        for (size_t i = 0; i < n; ++i) v[i] = f(static_cast<double>(i) * step);
+    }
+    double operator()(double r) const {
+        const double u = r / dr;
+        const size_t i = static_cast<size_t>(u);
+        if (i + 1 >= v.size()) return 0.0;
+        const double f = u - static_cast<double>(i);
+        return v[i] + f * (v[i + 1] - v[i]);
+    }
+};
+
+// Pixel-integrated values of a radial profile h(r) for a point at (fx, fy) in pixel 0 (pixel units), at
+// pixel offsets within ±radius, by Gauss–Legendre points per pixel axis.
+void integratePixels(const RadialTable& radial, double fx, double fy, int radius, const QuadratureRule& q, double pixelMm, float* out) {
+    const int side = 2 * radius + 1;
+    for (int dy = -radius; dy <= radius; ++dy)
+        for (int dx = -radius; dx <= radius; ++dx) {
+            double sum = 0;
+            for (size_t a = 0; a < q.nodes.size(); ++a)
+                for (size_t b = 0; b < q.nodes.size(); ++b) {
+                    const double ux = dx + q.nodes[a] - fx, uy = dy + q.nodes[b] - fy;
+                    sum += q.weights[a] * q.weights[b] * radial(std::sqrt(ux * ux + uy * uy) * pixelMm);
+                }
+            out[static_cast<size_t>(dy + radius) * side + (dx + radius)] = static_cast<float>(sum * pixelMm * pixelMm);
+        }
+}
+
+}  // namespace
+
+struct PsfProjector::Impl {
+    ProjectorOptions o;
+    ProjectorGeometry g;
+    std::shared_ptr<const WidefieldPsf> psf;
+    std::vector<EmittingDye> dyes;  // their spectral nodes
+    int pixelNodes = 3;
+    int bins = 1;
+    double halfDepthMm = 0;
+    std::vector<double> splitInnerMm;  // per bin
+    std::vector<int> layerBin;
+    struct PhaseKernel {
+        int radius = 0;
+        std::vector<float> values;
+    };
+    mutable std::vector<std::unique_ptr<RadialTable>> radials;  // [dye × layers + layer]
+    mutable std::unique_ptr<std::once_flag[]> radialBuilt;
+    mutable std::vector<PhaseKernel> kernels;  // [(dye × layers + layer) F² + phaseY F + phaseX]
+    mutable std::unique_ptr<std::once_flag[]> kernelBuilt;
+    mutable std::atomic<int64_t> kernelNanoseconds{0};
+    std::unique_ptr<FftConvolution> far;  // one kernel per bin
+    int farRadius = 0;
+    int reach = 0;
+
+    int regionWidth() const { return g.width + 2 * g.marginPixels; }
+    int regionHeight() const { return g.height + 2 * g.marginPixels; }
+    double layerDz(int l) const { return (l - 0.5 * g.layers + 0.5) * g.axialMm; }
+    double taperMm() const { return o.nearTaperPixels * g.pixelMm; }
+    double splitWeight(int bin, double rMm) const {  // 1 in the near part, 0 in the far part
+        const double r1 = splitInnerMm[static_cast<size_t>(bin)], r2 = r1 + taperMm();
+        return 1 - smoothStep01((rMm - r1) / (r2 - r1));
+    }
+    int kernelRadius(int layer) const {
+        return static_cast<int>(std::ceil((splitInnerMm[static_cast<size_t>(layerBin[static_cast<size_t>(layer)])] + taperMm()) / g.pixelMm)) + 1;
+    }
+    double profile(const std::vector<double>& lambda, const std::vector<double>& weight, double rMm, double dzMm) const {
+        double h = 0;
+        for (size_t q = 0; q < lambda.size(); ++q) h += weight[q] * psf->density(rMm, dzMm, lambda[q]);
+        return h;
+    }
+    const RadialTable& radial(size_t dye, int layer) const {
+        const size_t index = dye * static_cast<size_t>(g.layers) + static_cast<size_t>(layer);
+        std::call_once(radialBuilt[index], [&] {
+            const EmittingDye& t = dyes[dye];
+            const int bin = layerBin[static_cast<size_t>(layer)];
+            const double dz = layerDz(layer);
+            radials[index] = std::make_unique<RadialTable>((kernelRadius(layer) + 2) * g.pixelMm * std::sqrt(2.0), g.pixelMm / 64,
+                                                           [&](double r) { return profile(t.nodeLambda, t.nodeWeight, r, dz) * splitWeight(bin, r); });
+        });
+        return *radials[index];
+    }
+    const PhaseKernel& kernel(size_t dye, int layer, int phaseX, int phaseY) const {
+        const int F = o.kernelPhases;
+        const size_t index = (dye * static_cast<size_t>(g.layers) + static_cast<size_t>(layer)) * static_cast<size_t>(F * F) +
+                             static_cast<size_t>(phaseY) * F + static_cast<size_t>(phaseX);
+        std::call_once(kernelBuilt[index], [&] {
+            const auto start = std::chrono::steady_clock::now();
+            PhaseKernel k;
+            k.radius = kernelRadius(layer);
+            const int side = 2 * k.radius + 1;
+            k.values.resize(static_cast<size_t>(side) * side);
+            // Mirrors and the transpose of a canonical phase (x ≤ F/2, y ≤ F/2, x ≤ y) are copies: a point at
+            // phase f sees pixel offset d as a point at phase 1 − f sees −d.
+            auto copyFrom = [&](const PhaseKernel& c, bool mirrorX, bool mirrorY, bool transpose) {
+                for (int dy = -k.radius; dy <= k.radius; ++dy)
+                    for (int dx = -k.radius; dx <= k.radius; ++dx) {
+                        int sx = mirrorX ? -dx : dx, sy = mirrorY ? -dy : dy;
+                        if (transpose) std::swap(sx, sy);
+                        k.values[static_cast<size_t>(dy + k.radius) * side + (dx + k.radius)] =
+                            c.values[static_cast<size_t>(sy + k.radius) * side + (sx + k.radius)];
+                    }
+            };
+            if (phaseX > F / 2) copyFrom(kernel(dye, layer, F - phaseX, phaseY), true, false, false);
+            else if (phaseY > F / 2) copyFrom(kernel(dye, layer, phaseX, F - phaseY), false, true, false);
+            else if (phaseX > phaseY) copyFrom(kernel(dye, layer, phaseY, phaseX), false, false, true);
+            else {
+                const RadialTable& r = radial(dye, layer);
+                integratePixels(r, double(phaseX) / F, double(phaseY) / F, k.radius, gaussLegendre01(pixelNodes), g.pixelMm, k.values.data());
+            }
+            kernels[index] = std::move(k);
+            kernelNanoseconds += std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count();
+        });
+        return kernels[index];
+    }
+
+    // The pieces of an emission: up to 2 layers × 4 phase corners, each a kernel near the point and a
+    // bilinear deposit at the pixel centres for the far part.
+    template <class F>
+    void forEachPiece(const PointEmission& em, F&& f) const {
+        const int F_ = o.kernelPhases;
+        const double layerPos = snapped(std::clamp(em.layer, 0.0, double(g.layers - 1)));
+        const int l0 = std::clamp(static_cast<int>(std::floor(layerPos)), 0, g.layers - 1), l1 = std::min(l0 + 1, g.layers - 1);
+        const double fl = std::clamp(layerPos - l0, 0.0, 1.0);
+        const double pu = snapped(em.u * F_), pv = snapped(em.v * F_);
+        const int64_t iu = static_cast<int64_t>(std::floor(pu)), iv = static_cast<int64_t>(std::floor(pv));
+        const double fu = pu - static_cast<double>(iu), fv = pv - static_cast<double>(iv);
+        for (int dl = 0; dl < 2; ++dl) {
+            const double wl = dl ? fl : 1 - fl;
+            if (!(wl > 0)) continue;
+            const int layer = dl ? l1 : l0;
+            for (int corner = 0; corner < 4; ++corner) {
+                const double wc = ((corner & 1) ? fu : 1 - fu) * ((corner & 2) ? fv : 1 - fv) * wl;
+                if (!(wc > 0)) continue;
+                const int64_t qu = iu + (corner & 1), qv = iv + ((corner >> 1) & 1);
+                f(layer, qu, qv, wc);
+            }
+        }
+    }
+};
+
+PsfProjector::PsfProjector(const ChannelDyes& dyes, std::shared_ptr<const WidefieldPsf> psf, const ProjectorGeometry& geometry, int pixelNodes,
+                           const ProjectorOptions& options)
+    : impl_(std::make_unique<Impl>()) {
+    Impl& m = *impl_;
+    m.o = options;
+    m.g = geometry;
+    m.psf = std::move(psf);
+    m.dyes = dyes.dyes;
+    m.pixelNodes = pixelNodes;
+    if (m.g.layers < 2 || m.g.layers % 2) throw ConfigError("PSF projector: a plane needs an even number of layers, got " + std::to_string(m.g.layers));
+    m.halfDepthMm = 0.5 * m.g.layers * m.g.axialMm;
+    double lambdaMax = 0;
+    for (const EmittingDye& t : m.dyes)
+        for (double l : t.nodeLambda) lambdaMax = std::max(lambdaMax, l);
+    const double cutMm = m.psf->cutRadiusMm(lambdaMax);
+
+    // Far-field bins along dz; within a bin every layer splits near and far at the same radius, beyond
+    // the widest defocus disc of the bin.
+    m.bins = std::max(1, static_cast<int>(std::ceil(2 * m.halfDepthMm / (m.o.farBinUm / kUmPerMm))));
+    const double binMm = 2 * m.halfDepthMm / m.bins;
+    m.splitInnerMm.assign(static_cast<size_t>(m.bins), 0.0);
+    for (int b = 0; b < m.bins; ++b) {
+        const double binLo = -m.halfDepthMm + b * binMm, binHi = binLo + binMm;
+        const double widest = std::max(std::abs(binLo), std::abs(binHi));
+        m.splitInnerMm[static_cast<size_t>(b)] = (m.o.nearPixels + std::ceil(widest * m.g.tanThetaMax / m.g.pixelMm)) * m.g.pixelMm;
+    }
+    m.layerBin.resize(static_cast<size_t>(m.g.layers));
+    for (int l = 0; l < m.g.layers; ++l)
+        m.layerBin[static_cast<size_t>(l)] = std::clamp(static_cast<int>((m.layerDz(l) + m.halfDepthMm) / binMm), 0, m.bins - 1);
+    m.radials.resize(m.dyes.size() * static_cast<size_t>(m.g.layers));
+    m.radialBuilt = std::make_unique<std::once_flag[]>(m.radials.size());
+    m.kernels.resize(m.radials.size() * static_cast<size_t>(m.o.kernelPhases * m.o.kernelPhases));
+    m.kernelBuilt = std::make_unique<std::once_flag[]>(m.kernels.size());
+    for (double r : m.splitInnerMm) m.reach = std::max(m.reach, static_cast<int>(std::ceil((r + m.taperMm()) / m.g.pixelMm)) + 2);
+
+    // Far kernels: the detected-mass mean of the dyes' PSFs beyond the split, for a point at a pixel
+    // centre, one per bin.
+    m.farRadius = static_cast<int>(std::ceil(cutMm / m.g.pixelMm)) + 2;
+    m.far = std::make_unique<FftConvolution>(m.regionWidth(), m.regionHeight(), m.farRadius);
+    std::vector<double> meanLambda, meanWeight;
+    double meanTotal = 0;
+    for (const EmittingDye& t : m.dyes) meanTotal += t.detected;
+    for (const EmittingDye& t : m.dyes)
+        for (size_t q = 0; q < t.nodeLambda.size(); ++q) {
+            meanLambda.push_back(t.nodeLambda[q]);
+            meanWeight.push_back(t.nodeWeight[q] * t.detected / meanTotal);
+        }
+    const QuadratureRule q = gaussLegendre01(m.pixelNodes);
+    const int side = 2 * m.farRadius + 1;
+    for (int b = 0; b < m.bins; ++b) {
+        const double dz = -m.halfDepthMm + (b + 0.5) * binMm;
+        const RadialTable radial((m.farRadius + 2) * m.g.pixelMm * std::sqrt(2.0), m.g.pixelMm / 16,
+                                 [&](double r) { return m.profile(meanLambda, meanWeight, r, dz) * (1 - m.splitWeight(b, r)); });
+        std::vector<float> k(static_cast<size_t>(side) * side);
+        integratePixels(radial, 0.5, 0.5, m.farRadius, q, m.g.pixelMm, k.data());
+        m.far->addKernel(std::vector<double>(k.begin(), k.end()));
+    }
+}
+
+PsfProjector::~PsfProjector() = default;
+const ProjectorGeometry& PsfProjector::geometry() const { return impl_->g; }
+int PsfProjector::reachPixels() const { return impl_->reach; }
+double PsfProjector::kernelSeconds() const { return 1e-9 * static_cast<double>(impl_->kernelNanoseconds.load()); }
+
+std::vector<std::vector<double>> PsfProjector::project(const std::vector<PointEmission>& emissions, int targets, int threads,
+                                                       const std::atomic<bool>* cancel) const {
+    const Impl& m = *impl_;
+    const int F = m.o.kernelPhases, W = m.regionWidth(), H = m.regionHeight();
+    const int width = m.g.width, height = m.g.height, margin = m.g.marginPixels;
+    std::vector<std::vector<double>> out(static_cast<size_t>(std::max(0, targets)), std::vector<double>(static_cast<size_t>(width) * height, 0.0));
+    // Emissions by row (stable: each pixel adds its emissions in the caller's order within a row).
+    std::vector<uint32_t> order(emissions.size());
+    std::iota(order.begin(), order.end(), 0u);
+    std::vector<int64_t> row(emissions.size());
+    for (size_t i = 0; i < emissions.size(); ++i) row[i] = static_cast<int64_t>(std::floor(emissions[i].v));
+    std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return row[a] < row[b]; });
+    constexpr int kBandRows = 48;
+    const int bands = (H + kBandRows - 1) / kBandRows;
+    // Targets in batches, so that the far bins of many targets (per-label columns) fit in memory.
+    const int batch = std::max(1, std::min(targets, 8));
+    for (int t0 = 0; t0 < targets; t0 += batch) {
+        const int t1 = std::min(targets, t0 + batch);
+        std::vector<std::vector<std::vector<double>>> farBins(static_cast<size_t>(t1 - t0), std::vector<std::vector<double>>(static_cast<size_t>(m.bins)));
+        for (const PointEmission& em : emissions) {
+            if (static_cast<int>(em.target) < t0 || static_cast<int>(em.target) >= t1 || !(em.e != 0)) continue;
+            m.forEachPiece(em, [&](int layer, int64_t, int64_t, double) {
+                std::vector<double>& bin = farBins[static_cast<size_t>(static_cast<int>(em.target) - t0)][static_cast<size_t>(m.layerBin[static_cast<size_t>(layer)])];
+                if (bin.empty()) bin.assign(static_cast<size_t>(W) * H, 0.0);
+            });
+        }
+        parallelFor(static_cast<size_t>(bands), threads, [&](size_t band) {
+            if (cancel && cancel->load()) return;
+            const int y0 = static_cast<int>(band) * kBandRows, y1 = std::min(H, y0 + kBandRows);
+            const auto first = std::lower_bound(order.begin(), order.end(), int64_t(y0) - m.reach - 1, [&](uint32_t a, int64_t r) { return row[a] < r; });
+            for (auto it = first; it != order.end() && row[*it] <= y1 + m.reach; ++it) {
+                const PointEmission& em = emissions[*it];
+                if (static_cast<int>(em.target) < t0 || static_cast<int>(em.target) >= t1 || !(em.e != 0)) continue;
+                double* image = out[em.target].data();
+                auto& bins = farBins[static_cast<size_t>(static_cast<int>(em.target) - t0)];
+                m.forEachPiece(em, [&](int layer, int64_t qu, int64_t qv, double wc) {
+                    const int64_t px = floorDiv(qu, F), py = floorDiv(qv, F);
+                    const int phx = static_cast<int>(qu - px * F), phy = static_cast<int>(qv - py * F);
+                    const double weight = em.e * wc;
+                    const auto& k = m.kernel(em.dye, layer, phx, phy);
+                    const int side = 2 * k.radius + 1;
+                    // The near part only where the camera is (the far part reaches the whole region).
+                    const int64_t xa = std::max<int64_t>(margin, px - k.radius), xb = std::min<int64_t>(margin + width, px + k.radius + 1);
+                    for (int64_t y = std::max<int64_t>(std::max(y0, margin), py - k.radius);
+                         y < std::min<int64_t>(std::min(y1, margin + height), py + k.radius + 1); ++y) {
+                        double* __restrict r = image + static_cast<size_t>(y - margin) * width + (xa - margin);
+                        const float* __restrict kr = k.values.data() + static_cast<size_t>(y - py + k.radius) * side + (xa - px + k.radius);
+                        for (int64_t x = 0; x < xb - xa; ++x) r[x] += weight * kr[x];
+                    }
+                    // The far part: bilinear deposits at the four pixel centres around the node.
+                    const double cu = double(qu) / F - 0.5, cv = double(qv) / F - 0.5;
+                    const int64_t cx = static_cast<int64_t>(std::floor(cu)), cy = static_cast<int64_t>(std::floor(cv));
+                    const double gx = cu - static_cast<double>(cx), gy = cv - static_cast<double>(cy);
+                    std::vector<double>& bin = bins[static_cast<size_t>(m.layerBin[static_cast<size_t>(layer)])];
+                    for (int q = 0; q < 4; ++q) {
+                        const int64_t x = cx + (q & 1), y = cy + ((q >> 1) & 1);
+                        if (x < 0 || x >= W || y < y0 || y >= y1) continue;
+                        bin[static_cast<size_t>(y) * W + static_cast<size_t>(x)] += weight * ((q & 1) ? gx : 1 - gx) * ((q & 2) ? gy : 1 - gy);
+                    }
+                });
+            }
+        });
+        if (cancel && cancel->load()) return {};
+        parallelFor(static_cast<size_t>(t1 - t0), threads, [&](size_t ti) {
+            const std::vector<double> farImage = m.far->convolveSum(farBins[ti]);
+            std::vector<double>& image = out[static_cast<size_t>(t0) + ti];
+            for (int y = 0; y < height; ++y)
+                for (int x = 0; x < width; ++x)
+                    image[static_cast<size_t>(y) * width + x] += farImage[static_cast<size_t>(y + margin) * W + static_cast<size_t>(x + margin)];
+        });
+    }
+    return out;
+}
+
+std::vector<double> PsfProjector::backProject(const std::vector<double>& image, const std::vector<PointEmission>& emissions, int threads) const {
+    const Impl& m = *impl_;
+    const int F = m.o.kernelPhases, W = m.regionWidth(), H = m.regionHeight();
+    const int width = m.g.width, height = m.g.height, margin = m.g.marginPixels;
+    if (image.size() != static_cast<size_t>(width) * height)
+        throw ConfigError("PSF projector: the adjoint needs a " + std::to_string(width) + " x " + std::to_string(height) + " image, got " +
+                          std::to_string(image.size()) + " values");
+    // The far part's adjoint: the camera image in the region, correlated with each bin's kernel.
+    std::vector<double> region(static_cast<size_t>(W) * H, 0.0);
+    for (int y = 0; y < height; ++y)
+        for (int x = 0; x < width; ++x) region[static_cast<size_t>(y + margin) * W + static_cast<size_t>(x + margin)] = image[static_cast<size_t>(y) * width + x];
+    std::vector<uint8_t> binUsed(static_cast<size_t>(m.bins), 0);
+    for (const PointEmission& em : emissions)
+        m.forEachPiece(em, [&](int layer, int64_t, int64_t, double) { binUsed[static_cast<size_t>(m.layerBin[static_cast<size_t>(layer)])] = 1; });
+    std::vector<std::vector<double>> farAdjoint(static_cast<size_t>(m.bins));
+    parallelFor(static_cast<size_t>(m.bins), threads, [&](size_t b) {
+        if (binUsed[b]) farAdjoint[b] = m.far->correlate(region, static_cast<int>(b));
+    });
+    std::vector<double> out(emissions.size(), 0.0);
+    parallelFor(emissions.size(), threads, [&](size_t i) {
+        const PointEmission& em = emissions[i];
+        double sum = 0;
+        m.forEachPiece(em, [&](int layer, int64_t qu, int64_t qv, double wc) {
+            const int64_t px = floorDiv(qu, F), py = floorDiv(qv, F);
+            const int phx = static_cast<int>(qu - px * F), phy = static_cast<int>(qv - py * F);
+            const auto& k = m.kernel(em.dye, layer, phx, phy);
+            const int side = 2 * k.radius + 1;
+            const int64_t xa = std::max<int64_t>(margin, px - k.radius), xb = std::min<int64_t>(margin + width, px + k.radius + 1);
+            double near = 0;
+            for (int64_t y = std::max<int64_t>(margin, py - k.radius); y < std::min<int64_t>(margin + height, py + k.radius + 1); ++y) {
+                const double* r = image.data() + static_cast<size_t>(y - margin) * width + (xa - margin);
+                const float* kr = k.values.data() + static_cast<size_t>(y - py + k.radius) * side + (xa - px + k.radius);
+                for (int64_t x = 0; x < xb - xa; ++x) near += r[x] * kr[x];
+            }
+            const double cu = double(qu) / F - 0.5, cv = double(qv) / F - 0.5;
+            const int64_t cx = static_cast<int64_t>(std::floor(cu)), cy = static_cast<int64_t>(std::floor(cv));
+            const double gx = cu - static_cast<double>(cx), gy = cv - static_cast<double>(cy);
+            const std::vector<double>& adj = farAdjoint[static_cast<size_t>(m.layerBin[static_cast<size_t>(layer)])];
+            double far = 0;
+            for (int q = 0; q < 4; ++q) {
+                const int64_t x = cx + (q & 1), y = cy + ((q >> 1) & 1);
+                if (x < 0 || x >= W || y < 0 || y >= H) continue;
+                far += adj[static_cast<size_t>(y) * W + static_cast<size_t>(x)] * ((q & 1) ? gx : 1 - gx) * ((q & 2) ? gy : 1 - gy);
+            }
+            sum += wc * (near + far);
+        });
+        out[i] = sum;
+    });
+    return out;
+}
+
+}  // namespace fluorosim::optics

@@ -1,0 +1,184 @@
+// The computed image as a linear operator: adjoints by the dot-product test, columns that add up to the
+// image the acquisition computes, label parts that add up to the concentrations.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "optics/acquisition.h"
+#include "optics/fft_convolution.h"
+#include "optics/imaging_operator.h"
+#include "optics/scene_files.h"
+#include "support/fit_scenes.h"
+#include "support/fluorescent_scenes.h"
+#include "support/temp_dir.h"
+
+namespace fluorosim {
+namespace {
+
+using testing::TempDir;
+
+double dot(const std::vector<double>& a, const std::vector<double>& b) {
+    double s = 0;
+    for (size_t i = 0; i < a.size(); ++i) s += a[i] * b[i];
+    return s;
+}
+
+std::vector<double> randomVector(size_t n, std::mt19937_64& rng, double lo = -1, double hi = 1) {
+    std::uniform_real_distribution<double> u(lo, hi);
+    std::vector<double> v(n);
+    for (double& x : v) x = u(rng);
+    return v;
+}
+
+TEST(FftConvolution, CorrelationIsTheConvolutionsAdjoint) {
+    std::mt19937_64 rng(7);
+    const int w = 37, h = 23, r = 6;
+    optics::FftConvolution conv(w, h, r);
+    for (int b = 0; b < 3; ++b) conv.addKernel(randomVector(static_cast<size_t>((2 * r + 1) * (2 * r + 1)), rng));
+    for (int b = 0; b < 3; ++b) {
+        const std::vector<double> x = randomVector(static_cast<size_t>(w * h), rng), y = randomVector(static_cast<size_t>(w * h), rng);
+        std::vector<std::vector<double>> images(3);
+        images[static_cast<size_t>(b)] = x;
+        const double lhs = dot(conv.convolveSum(images), y), rhs = dot(x, conv.correlate(y, b));
+        EXPECT_NEAR(lhs, rhs, 1e-12 * std::abs(lhs)) << "kernel " << b;
+    }
+}
+
+struct FitSpecimen {
+    TempDir dir;
+    Scene scene;
+    optics::Microscope microscope;
+    explicit FitSpecimen(const testing::FitSceneOptions& o = {})
+        : scene(optics::loadSceneFile(testing::writeFitScene(dir.path(), o), testing::database())),
+          microscope(optics::Microscope::fromScene(scene, testing::database())) {}
+};
+
+TEST(PsfProjector, BackProjectionIsTheProjectionsAdjoint) {
+    FitSpecimen s;
+    optics::AcquireOptions o;
+    const optics::ChannelImaging imaging = optics::setUpChannelImaging(s.scene, s.microscope, 0, o);
+    const optics::PsfProjector& p = imaging.unscattered->projector();
+    const optics::ProjectorGeometry& g = p.geometry();
+    std::mt19937_64 rng(11);
+    std::uniform_real_distribution<double> u(0, 1);
+    // Points anywhere in the region and between layers, on and off the lattice's phases.
+    std::vector<optics::PointEmission> ems;
+    for (int i = 0; i < 400; ++i) {
+        optics::PointEmission e;
+        e.u = u(rng) * (g.width + 2 * g.marginPixels);
+        e.v = u(rng) * (g.height + 2 * g.marginPixels);
+        if (i % 4 == 0) e.u = std::floor(e.u * 4) / 4, e.v = std::floor(e.v * 4) / 4;
+        e.layer = u(rng) * (g.layers - 1);
+        if (i % 3 == 0) e.layer = std::floor(e.layer);
+        e.e = u(rng);
+        e.dye = 0;
+        ems.push_back(e);
+    }
+    const std::vector<double> y = randomVector(static_cast<size_t>(g.width * g.height), rng);
+    const std::vector<double> forward = p.project(ems, 1, 2)[0];
+    const std::vector<double> back = p.backProject(y, ems, 2);
+    double rhs = 0;
+    for (size_t i = 0; i < ems.size(); ++i) rhs += ems[i].e * back[i];
+    const double lhs = dot(forward, y);
+    EXPECT_NEAR(lhs, rhs, 1e-12 * std::abs(lhs));
+    std::printf("  <P e, y> = %.15g, <e, P^T y> = %.15g\n", lhs, rhs);
+}
+
+TEST(StackOperator, AdjointPassesTheDotProductTestForLabelsAndGrid) {
+    FitSpecimen s;
+    optics::AcquireOptions o;
+    optics::StackOperator op(s.scene, s.microscope, {0, 1}, o);
+    ASSERT_TRUE(op.refreshGains(s.scene));
+    std::mt19937_64 rng(3);
+    for (bool grid : {false, true}) {
+        const optics::ParameterMap map = grid ? optics::ParameterMap::grid(0.004, op.lattices()) : optics::ParameterMap::labels(op.labels(), false);
+        ASSERT_GT(map.size(), 0u);
+        const std::vector<double> theta = randomVector(map.size(), rng, 0, 2), y = randomVector(op.stackPixels(), rng);
+        const double lhs = dot(op.apply(map, theta, false), y), rhs = dot(theta, op.applyAdjoint(map, y));
+        EXPECT_NEAR(lhs, rhs, 1e-11 * std::abs(lhs)) << (grid ? "grid" : "labels");
+        std::printf("  %s (%zu parameters): <A t, y> = %.15g, <t, A^T y> = %.15g\n", grid ? "grid" : "labels", map.size(), lhs, rhs);
+    }
+}
+
+TEST(StackOperator, LabelColumnsAddUpToTheAcquisitionsComputedImage) {
+    FitSpecimen s;
+    optics::AcquireOptions o;
+    optics::StackOperator op(s.scene, s.microscope, {0, 1}, o);
+    ASSERT_TRUE(op.refreshGains(s.scene));
+    const optics::ParameterMap map = optics::ParameterMap::labels(op.labels(), false);
+    ASSERT_EQ(map.size(), 3u) << "three labels hold dye";
+    const optics::SparseColumns cols = op.columns(map);
+    std::vector<double> sum(op.stackPixels(), 0.0);
+    for (size_t j = 0; j < map.size(); ++j)
+        for (size_t k = 0; k < cols.pixels[j].size(); ++k) sum[cols.pixels[j][k]] += cols.values[j][k];
+    const std::vector<double> applied = op.apply(map, std::vector<double>(map.size(), 1.0));
+    // The acquisition's computed part, plane by plane (its own lattice, not split by label).
+    const size_t planePixels = static_cast<size_t>(op.width()) * op.height();
+    double worstColumns = 0, worstAcquisition = 0, peak = 0;
+    for (size_t slot = 0; slot < 2; ++slot) {
+        const optics::ChannelImaging imaging = optics::setUpChannelImaging(s.scene, s.microscope, slot, o);
+        for (int k = 0; k < op.planes(); ++k) {
+            const optics::PlaneImage image = optics::acquirePlane(s.scene, s.microscope, slot, k, [&] {
+                optics::AcquireOptions a = o;
+                a.spp = 1;
+                return a;
+            }(), &imaging);
+            for (size_t i = 0; i < planePixels; ++i) {
+                const size_t at = op.planeImage(slot, k) * planePixels + i;
+                peak = std::max(peak, applied[at]);
+                worstColumns = std::max(worstColumns, std::abs(sum[at] - applied[at]));
+                worstAcquisition = std::max(worstAcquisition, std::abs(image.computedImage[i] - applied[at]));
+            }
+        }
+    }
+    std::printf("  peak %.6g e-; largest |sum of columns - image| %.3g, |acquisition's computed part - image| %.3g\n", peak, worstColumns, worstAcquisition);
+    EXPECT_GT(peak, 0);
+    EXPECT_LE(worstColumns, 1e-11 * peak);
+    // The label split keeps each part in float: parts and whole differ by float rounding (1e-7).
+    EXPECT_LE(worstAcquisition, 1e-6 * peak);
+}
+
+TEST(EmissionLattice, LabelPartsAddUpToTheConcentrations) {
+    FitSpecimen s;
+    optics::AcquireOptions o;
+    optics::StackOperator op(s.scene, s.microscope, {0, 1}, o);
+    size_t points = 0, checked = 0;
+    for (const optics::EmissionLattice* l : op.lattices()) {
+        ASSERT_TRUE(l->hasParts());
+        for (size_t p = 0; p < l->size(); ++p, ++points)
+            for (int slot = 0; slot < l->slots(); ++slot) {
+                double sum = 0;
+                for (const auto* part = l->partsBegin(p); part != l->partsEnd(p); ++part)
+                    if (part->slot == slot) sum += part->value;
+                const double c = l->concentration(p, slot);
+                EXPECT_NEAR(sum, c, 1e-6 * std::max(c, 1e-12)) << "point " << p << " slot " << slot;
+                checked += c > 0;
+            }
+        for (const optics::LabelKey& k : l->labels()) EXPECT_NE(k.value, 0) << "every voxel with dye carries a label";
+    }
+    std::printf("  %zu points, %zu concentrations checked\n", points, checked);
+    EXPECT_GT(checked, 1000u);
+}
+
+TEST(StackOperator, IsLinearInTheParameters) {
+    FitSpecimen s;
+    optics::AcquireOptions o;
+    optics::StackOperator op(s.scene, s.microscope, {0, 1}, o);
+    ASSERT_TRUE(op.refreshGains(s.scene));
+    const optics::ParameterMap map = optics::ParameterMap::labels(op.labels(), false);
+    std::mt19937_64 rng(5);
+    const std::vector<double> a = randomVector(map.size(), rng, 0, 3), b = randomVector(map.size(), rng, 0, 3);
+    std::vector<double> c(map.size());
+    for (size_t j = 0; j < c.size(); ++j) c[j] = 2 * a[j] - 0.5 * b[j];
+    const std::vector<double> ya = op.apply(map, a, false), yb = op.apply(map, b, false), yc = op.apply(map, c, false);
+    double worst = 0, peak = 0;
+    for (size_t i = 0; i < yc.size(); ++i) {
+        worst = std::max(worst, std::abs(yc[i] - (2 * ya[i] - 0.5 * yb[i])));
+        peak = std::max(peak, std::abs(yc[i]));
+    }
+    EXPECT_LE(worst, 1e-12 * peak);
+}
+
+}  // namespace
+}  // namespace fluorosim
