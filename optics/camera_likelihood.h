@@ -6,12 +6,18 @@
 // the photoelectrons (read noise / M) and F² the excess noise factor (1 for sCMOS, 2 for an EMCCD:
 // optics/detector.h). The shifted, scaled Poisson approximation (Huang et al. 2013, Nature Methods,
 // for sCMOS; F² = 2 its EMCCD form) matches both moments:
-//   x = max(0, (s + σ²/F²) / F²),   λ = (μ + σ²/F²) / F²,   x ~ Poisson(λ),
+//   x = (s + σ²/F²) / F²,   λ = (μ + σ²/F²) / F²,   x ~ Poisson(λ),
 // negative log-likelihood Σ λ − x ln λ. A fit minimises it as least squares over the signed-root
 // deviance r = sign(x − λ) √(2 [λ − x + x ln(x/λ)]) (Σ r² is twice the negative log-likelihood up to a
 // constant), which is unbiased at any count; Pearson residuals (x − λ)/√λ with live weights are biased
 // (Humphrey, Liu & Buote 2009) and are kept only for that comparison. The Fisher information of λ in
 // this model is 1/λ per pixel.
+// x is not clamped at zero (Huang et al. clamp it): read noise makes x < 0 in dark pixels, and a clamp
+// raises their mean above λ, a bias that reached 7 standard errors at one photoelectron per pixel
+// (tests/optics/concentration_fit_test.cpp). For x <= 0 the residual keeps the Poisson score
+// ∂(r²/2)/∂λ = 1 − x/λ: r² = 2λ − 2x ln(λ/λ_min), with λ_min = σ²/F⁴ the smallest mean a pixel can
+// have, which is continuous with the deviance at x = 0 and non-negative for λ >= λ_min.
+#include <algorithm>
 #include <vector>
 
 #include "optics/ome_tiff.h"
@@ -33,19 +39,21 @@ struct CameraNoise {
     double shift() const { return readSigmaElectrons() * readSigmaElectrons() / excessNoiseFactorSquared; }
     // Photoelectrons from ADU.
     double electrons(double adu) const { return (adu - offsetAdu) * gainElectronsPerAdu / emGain; }
-    // The Poisson-scaled observation x and mean λ.
+    // The Poisson-scaled observation x and mean λ, and the smallest mean (no signal).
     double scaledObservation(double signalElectrons) const;
+    double scaledMinimum() const { return std::max(shift() / excessNoiseFactorSquared, 1e-12); }
     double scaledMean(double expectedElectrons) const { return (expectedElectrons + shift()) / excessNoiseFactorSquared; }
     // Whether an ADU value lies where the camera clips (at the ADC's maximum, or within `sigmas` noise
     // standard deviations of the full well): such pixels are left out of a fit.
     bool saturated(double adu, double sigmas) const;
 };
 
-// The signed-root deviance of an observation x (>= 0) under a Poisson mean λ (> 0), and its derivative
-// with respect to λ; a series near x = λ keeps both accurate where the closed form cancels.
+// The signed-root deviance of an observation x under a Poisson mean λ >= λ_min > 0, and its derivative
+// with respect to λ; a series near x = λ keeps both accurate where the closed form cancels. x <= 0
+// (read noise below a dark pixel's mean) takes the continuation above.
 struct DevianceResidual {
     double r, dr;
 };
-DevianceResidual devianceResidual(double x, double lambda);
+DevianceResidual devianceResidual(double x, double lambda, double lambdaMin = 1e-12);
 
 }  // namespace fluorosim::optics

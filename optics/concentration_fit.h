@@ -36,6 +36,7 @@ struct FitOptions {
     FitParametrisation parametrisation = FitParametrisation::Labels;
     double gridCellUm = 8;            // the coarse grid's cell
     bool fitUnlabelled = false;       // dye outside every label (and homogeneous dyed media) as parameters too
+    std::vector<int> labels;          // per label: fit only these label values (empty: every label); the rest stay fixed
     std::vector<std::string> channels;  // the microscope's channels to fit (empty: every channel of the stack)
     FitLikelihood likelihood = FitLikelihood::Deviance;
     ScatteredModel scattered = ScatteredModel::None;

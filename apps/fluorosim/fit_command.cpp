@@ -27,6 +27,7 @@ extern "C" void onFitSignal(int) { gCancel.store(true); }
 struct FitArgs {
     std::string scene, stack, output, params = "labels", scattered = "none", likelihood = "deviance";
     std::vector<std::string> channels;
+    std::vector<int> labels;
     int scatteredSpp = 16, outer = 3, iterations = 100, threads = 0;
     std::optional<int64_t> seed;
     std::optional<double> priorWeight;
@@ -39,6 +40,7 @@ optics::FitOptions fitOptions(const FitArgs& a, const Scene& scene) {
     optics::setScatteredModel(o, a.scattered, "--scattered");
     optics::setLikelihood(o, a.likelihood, "--likelihood");
     o.channels = a.channels;
+    o.labels = a.labels;
     o.scatteredSpp = a.scatteredSpp;
     o.outerIterations = a.outer;
     o.maxIterations = a.iterations;
@@ -240,6 +242,7 @@ void addFitCommands(CLI::App& app) {
     fit->add_option("--outer", a->outer, "Outer iterations at most (attenuation and scattered light refreshed between)");
     fit->add_option("--iterations", a->iterations, "Trust-region iterations per outer iteration, at most");
     fit->add_option("--prior-weight", a->priorWeight, "Grid: weight of the gradient prior (default: the discrepancy rule)");
+    fit->add_option("--labels", a->labels, "Per label: fit only these labels (others stay at the scene's concentrations)")->delimiter(',');
     fit->add_flag("--unlabelled", a->unlabelled, "Fit dye outside every label (and homogeneous dyed media) too");
     fit->add_option("--threads", a->threads, "Threads (0: all cores)");
     fit->add_option("--seed", a->seed, "Seed of the scattered light's render");
