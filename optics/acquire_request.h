@@ -32,17 +32,22 @@ inline void checkAcquireRequest(const AcquireRequest& a) {
     if (a.seed && *a.seed < 0) throw ConfigError("--seed: must be >= 0, got " + std::to_string(*a.seed));
 }
 
+// The stack overrides (planes, step) of acquire and fit, applied to `m` and validated against the scene.
+inline void applyStackOverrides(Microscope& m, const Scene& scene, std::optional<int> planes, const std::optional<std::string>& step) {
+    if (planes) {
+        if (*planes < 1 || *planes > 4096) throw ConfigError("--planes: must lie in [1, 4096], got " + std::to_string(*planes));
+        m.stack.planes = *planes;
+    }
+    if (step) m.stack.stepMm = parseQuantity(*step, Dimension::Length, "--step");
+    if (!(m.stack.stepMm > 0)) throw ConfigError("--step: must be positive, got " + step.value_or(""));
+    m.validate(scene);
+}
+
 // Applies the stack overrides (planes, step) to `m`, validates it against the scene, and returns the
 // acquisition options. Throws ConfigError naming the option and its value.
 inline AcquireOptions applyAcquireRequest(const AcquireRequest& a, const Scene& scene, Microscope& m) {
     checkAcquireRequest(a);
-    if (a.planes) {
-        if (*a.planes < 1 || *a.planes > 4096) throw ConfigError("--planes: must lie in [1, 4096], got " + std::to_string(*a.planes));
-        m.stack.planes = *a.planes;
-    }
-    if (a.step) m.stack.stepMm = parseQuantity(*a.step, Dimension::Length, "--step");
-    if (!(m.stack.stepMm > 0)) throw ConfigError("--step: must be positive, got " + a.step.value_or(""));
-    m.validate(scene);
+    applyStackOverrides(m, scene, a.planes, a.step);
 
     AcquireOptions o;
     o.spp = a.spp.value_or(scene.render.spp);

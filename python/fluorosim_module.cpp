@@ -16,6 +16,9 @@
 #include "core/units.h"
 #include "database.h"
 #include "optics/acquisition.h"
+#include "optics/concentration_fit.h"
+#include "optics/observed_stack.h"
+#include "optics/stack_files.h"
 #include "render/fluorescence.h"
 #include "render/renderer.h"
 #include "optics/acquire_request.h"
@@ -212,6 +215,187 @@ py::dict voxelizeSwc(const std::vector<std::string>& swc, const std::string& vox
     return out;
 }
 
+
+py::dict parameterDict(const Scene& scene, const optics::FitParameter& p) {
+    py::dict d;
+    d["name"] = p.name;
+    if (p.node) d["node"] = py::make_tuple(p.cell[0], p.cell[1], p.cell[2]);
+    else {
+        d["label"] = p.label.value;
+        d["medium"] = scene.media[static_cast<size_t>(p.label.medium)].name();
+    }
+    d["centre_mm"] = py::make_tuple(p.centreMm.x, p.centreMm.y, p.centreMm.z);
+    d["reference_uM"] = p.referenceMolar * 1e6;
+    return d;
+}
+
+optics::FitOptions fitOptionsFrom(const std::string& params, const std::string& scattered, int scatteredSpp, const std::string& likelihood, int outer,
+                                  int iterations, std::optional<double> priorWeight, const std::vector<int>& labels, bool unlabelled,
+                                  const std::vector<std::string>& channels, std::optional<std::vector<double>> start, int threads,
+                                  std::optional<int64_t> seed, const Scene& scene) {
+    optics::FitOptions o;
+    optics::setParametrisation(o, params, "params");
+    optics::setScatteredModel(o, scattered, "scattered");
+    optics::setLikelihood(o, likelihood, "likelihood");
+    o.scatteredSpp = scatteredSpp;
+    o.outerIterations = outer;
+    o.maxIterations = iterations;
+    o.priorWeight = priorWeight;
+    o.labels = labels;
+    o.fitUnlabelled = unlabelled;
+    o.channels = channels;
+    o.start = std::move(start);
+    if (threads < 0 || threads > 4096) throw ConfigError("threads: must lie in [0, 4096], got " + std::to_string(threads));
+    if (seed && *seed < 0) throw ConfigError("seed: must be >= 0, got " + std::to_string(*seed));
+    o.acquisition.threads = threads;
+    o.acquisition.seed = seed ? static_cast<uint64_t>(*seed) : scene.render.seed;
+    o.validate();
+    return o;
+}
+
+// An observed stack from a path (an OME-TIFF, read as the CLI reads it) or from an array (C, Z, Y, X)
+// with what the caller says about it; what the caller leaves out comes from the scene's microscope.
+optics::ObservedStack observedStack(const py::object& stack, const optics::Microscope& m, const std::optional<std::vector<std::string>>& channels,
+                                    std::optional<double> pixelSizeUm, std::optional<double> zStepUm, const std::optional<py::dict>& camera,
+                                    const std::string& values) {
+    if (py::isinstance<py::str>(stack) || py::hasattr(stack, "__fspath__"))
+        return optics::readOmeStack(py::str(py::module_::import("os").attr("fspath")(stack)).cast<std::string>());
+    const auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(stack);
+    if (!a || a.ndim() != 4) throw ConfigError("stack: expected a path or an array of shape (channels, planes, height, width)");
+    optics::ObservedStack s;
+    s.path = "<array>";
+    s.channels = static_cast<int>(a.shape(0));
+    s.planes = static_cast<int>(a.shape(1));
+    s.height = static_cast<int>(a.shape(2));
+    s.width = static_cast<int>(a.shape(3));
+    s.data.assign(a.data(), a.data() + a.size());
+    s.pixelSizeUm = pixelSizeUm.value_or(m.pixelSizeMm() * 1e3);
+    s.zStepUm = zStepUm.value_or(m.stack.stepMm * 1e3);
+    s.exposureS = m.detector.exposureS;
+    if (values != "adu" && values != "electrons") throw ConfigError("values: expected \"adu\" or \"electrons\", got \"" + values + "\"");
+    s.values = values;
+    s.integerPixels = values == "adu";
+    if (channels) s.channelNames = *channels;
+    else
+        for (const optics::MicroscopeChannel& c : m.channels) s.channelNames.push_back(c.name);
+    if (static_cast<int>(s.channelNames.size()) != s.channels)
+        throw ConfigError("stack: " + std::to_string(s.channels) + " channels in the array, " + std::to_string(s.channelNames.size()) + " names");
+    optics::CameraMetadata cam = optics::cameraMetadata(m.detector);
+    if (camera) {
+        const py::dict& c = *camera;
+        for (const auto& item : c) {
+            const std::string k = py::str(item.first);
+            if (k == "sensor") cam.sensor = py::str(item.second);
+            else if (k == "gain_e_per_adu") cam.gainElectronsPerAdu = item.second.cast<double>();
+            else if (k == "offset_adu") cam.offsetAdu = item.second.cast<double>();
+            else if (k == "read_noise_e") cam.readNoiseElectrons = item.second.cast<double>();
+            else if (k == "em_gain") cam.emGain = item.second.cast<double>();
+            else if (k == "dark_current_e_per_s") cam.darkCurrentElectronsPerS = item.second.cast<double>();
+            else if (k == "full_well_e") cam.fullWellElectrons = item.second.cast<double>();
+            else if (k == "bit_depth") cam.bitDepth = item.second.cast<int>();
+            else
+                throw ConfigError("camera: unknown key \"" + k + "\" (known: sensor, gain_e_per_adu, offset_adu, read_noise_e, em_gain, dark_current_e_per_s, "
+                                  "full_well_e, bit_depth)");
+        }
+    }
+    s.camera = cam;
+    return s;
+}
+
+py::dict fitStack(const py::object& sceneArg, const py::object& stackArg, std::optional<int> planes, const std::optional<std::string>& step,
+                  const std::optional<std::vector<std::string>>& stackChannels,
+                  std::optional<double> pixelSizeUm, std::optional<double> zStepUm, const std::optional<py::dict>& camera, const std::string& values,
+                  const std::string& params, const std::vector<std::string>& channels, const std::string& scattered, int scatteredSpp,
+                  const std::string& likelihood, int outer, int iterations, std::optional<double> priorWeight, const std::vector<int>& labels,
+                  bool unlabelled, std::optional<std::vector<double>> start, int threads, std::optional<int64_t> seed,
+                  const std::optional<std::string>& base) {
+    Scene scene = loadAnyScene(sceneArg, base);
+    optics::Microscope m = optics::Microscope::fromScene(scene, database());
+    optics::applyStackOverrides(m, scene, planes, step);
+    const optics::FitOptions o =
+        fitOptionsFrom(params, scattered, scatteredSpp, likelihood, outer, iterations, priorWeight, labels, unlabelled, channels, std::move(start), threads, seed, scene);
+    const optics::ObservedStack observed = observedStack(stackArg, m, stackChannels, pixelSizeUm, zStepUm, camera, values);
+    const optics::FitData data = optics::fitData(observed, m, o);
+    optics::FitResult r;
+    {
+        py::gil_scoped_release release;
+        r = optics::fitConcentrations(scene, m, data, o);
+    }
+    py::list ps;
+    std::vector<double> theta, se, crb, conc, concSe;
+    for (const optics::FittedParameter& p : r.parameters) {
+        py::dict d = parameterDict(scene, p.parameter);
+        d["theta"] = p.theta;
+        d["standard_error"] = p.standardError;
+        d["cramer_rao_bound"] = p.cramerRao;
+        d["concentration_uM"] = p.concentrationUm;
+        d["concentration_standard_error_uM"] = p.concentrationStandardErrorUm;
+        d["at_bound"] = p.atBound;
+        ps.append(d);
+        theta.push_back(p.theta);
+        se.push_back(p.standardError);
+        crb.push_back(p.cramerRao);
+        conc.push_back(p.concentrationUm);
+        concSe.push_back(p.concentrationStandardErrorUm);
+    }
+    const auto n = static_cast<py::ssize_t>(theta.size());
+    const std::vector<py::ssize_t> shape{static_cast<py::ssize_t>(data.channels.size()), m.stack.planes, m.height, m.width};
+    py::dict out;
+    out["parameters"] = ps;
+    out["theta"] = toArray(theta, {n});
+    out["standard_error"] = toArray(se, {n});
+    out["cramer_rao_bound"] = toArray(crb, {n});
+    out["concentration_uM"] = toArray(conc, {n});
+    out["concentration_standard_error_uM"] = toArray(concSe, {n});
+    py::list names;
+    for (size_t c : data.channels) names.append(m.channels[c].name);
+    out["channels"] = names;
+    out["model"] = toArray(r.model, shape);
+    out["residual"] = toArray(r.residual, shape);
+    out["normalised_residual"] = toArray(r.normalisedResidual, shape);
+    out["deviance"] = r.deviance;
+    out["chi2"] = r.chi2;
+    out["degrees_of_freedom"] = r.degreesOfFreedom;
+    out["pixels"] = r.pixels;
+    out["saturated_pixels_left_out"] = r.saturatedPixels;
+    out["iterations"] = r.iterations;
+    out["outer_iterations"] = r.outerIterations;
+    out["forward_image_equivalents"] = r.forwardEquivalents;
+    out["prior_weight"] = r.priorWeight;
+    out["seconds"] = r.seconds;
+    out["warnings"] = r.warnings;
+    out["solver_report"] = r.solverReport;
+    return out;
+}
+
+py::dict gradientOf(const py::object& sceneArg, const std::string& params, const std::vector<std::string>& channels, int threads,
+                    const std::optional<std::string>& base) {
+    const Scene scene = loadAnyScene(sceneArg, base);
+    const optics::Microscope m = optics::Microscope::fromScene(scene, database());
+    optics::FitOptions o;
+    optics::setParametrisation(o, params, "params");
+    o.channels = channels;
+    if (threads < 0 || threads > 4096) throw ConfigError("threads: must lie in [0, 4096], got " + std::to_string(threads));
+    o.acquisition.threads = threads;
+    optics::Gradient g;
+    {
+        py::gil_scoped_release release;
+        g = optics::fitGradient(scene, m, o);
+    }
+    std::vector<float> all;
+    for (const auto& c : g.columns) all.insert(all.end(), c.begin(), c.end());
+    py::list ps, names;
+    for (const optics::FitParameter& p : g.parameters) ps.append(parameterDict(scene, p));
+    for (size_t c : g.channels) names.append(m.channels[c].name);
+    py::dict out;
+    out["columns"] = toArray(all, {static_cast<py::ssize_t>(g.columns.size()), static_cast<py::ssize_t>(g.channels.size()), m.stack.planes, m.height, m.width});
+    out["parameters"] = ps;
+    out["channels"] = names;
+    out["pixel_size_um"] = m.pixelSizeMm() * 1e3;
+    out["z_step_um"] = m.stack.stepMm * 1e3;
+    return out;
+}
+
 }  // namespace
 
 PYBIND11_MODULE(fluorosim, mod) {
@@ -220,6 +404,8 @@ PYBIND11_MODULE(fluorosim, mod) {
     py::register_exception_translator([](std::exception_ptr p) {
         try {
             if (p) std::rethrow_exception(p);
+        } catch (const Cancelled& e) {
+            PyErr_SetString(PyExc_KeyboardInterrupt, e.what());
         } catch (const ConfigError& e) {
             PyErr_SetString(PyExc_ValueError, e.what());
         } catch (const IoError& e) {
@@ -245,6 +431,24 @@ PYBIND11_MODULE(fluorosim, mod) {
             "Voxelize SWC neurons into an OpenVDB file, as `fluorosim voxelize` (one dye and concentration, or one per file). "
             "Returns a dict: output, grids [{name, units, active_voxels, covered_volume_um3, analytic_volume_um3, max_value}], "
             "label_voxels, voxel_size_um, seconds.");
+    mod.def("fit", &fitStack, py::arg("scene"), py::arg("stack"), py::kw_only(), py::arg("planes") = py::none(), py::arg("step") = py::none(),
+            py::arg("stack_channels") = py::none(),
+            py::arg("pixel_size_um") = py::none(), py::arg("z_step_um") = py::none(), py::arg("camera") = py::none(), py::arg("values") = "adu",
+            py::arg("params") = "labels", py::arg("channels") = std::vector<std::string>{}, py::arg("scattered") = "none",
+            py::arg("scattered_spp") = 16, py::arg("likelihood") = "deviance", py::arg("outer") = 3, py::arg("iterations") = 100,
+            py::arg("prior_weight") = py::none(), py::arg("labels") = std::vector<int>{}, py::arg("unlabelled") = false,
+            py::arg("start") = py::none(), py::arg("threads") = 0, py::arg("seed") = py::none(), py::arg("base") = py::none(),
+            "Fit dye concentrations to an observed stack, as `fluorosim fit` (planes and step as given to acquire). `stack`: an OME-TIFF path, or an array (C, Z, Y, X) of "
+            "ADU (values='adu') or photoelectrons (values='electrons') with stack_channels (names), pixel_size_um, z_step_um and "
+            "camera (a dict: sensor, gain_e_per_adu, offset_adu, read_noise_e, em_gain, dark_current_e_per_s, full_well_e, "
+            "bit_depth); what is not given comes from the scene's microscope. Returns a dict: parameters [{name, label, medium, "
+            "theta, standard_error, cramer_rao_bound, concentration_uM, concentration_standard_error_uM, at_bound}], theta, "
+            "standard_error, concentration_uM (arrays), model, residual, normalised_residual (C, Z, Y, X), deviance, chi2, "
+            "degrees_of_freedom, iterations, outer_iterations, seconds, warnings, solver_report.");
+    mod.def("gradient", &gradientOf, py::arg("scene"), py::kw_only(), py::arg("params") = "labels",
+            py::arg("channels") = std::vector<std::string>{}, py::arg("threads") = 0, py::arg("base") = py::none(),
+            "The model's Jacobian at the scene's concentrations, as `fluorosim gradient`: columns (P, C, Z, Y, X) of expected "
+            "photoelectrons per unit of each parameter, parameters, channels, pixel_size_um, z_step_um.");
     mod.def("dyes", [] { return database().dyeIds(); }, "The dyes of the spectral database.");
     mod.def("filters", [] { return database().filterNames(); }, "The filters of the spectral database.");
     mod.def("dye", &dyeSpectra, py::arg("name"), py::arg("wavelengths_nm"),

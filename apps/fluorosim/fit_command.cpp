@@ -12,6 +12,7 @@
 #include "commands.h"
 #include "core/errors.h"
 #include "core/output_checks.h"
+#include "optics/acquire_request.h"
 #include "optics/concentration_fit.h"
 #include "optics/observed_stack.h"
 #include "optics/scene_files.h"
@@ -25,6 +26,8 @@ std::atomic<bool> gCancel{false};
 extern "C" void onFitSignal(int) { gCancel.store(true); }
 
 struct FitArgs {
+    std::optional<int> planes;
+    std::optional<std::string> step;
     std::string scene, stack, output, params = "labels", scattered = "none", likelihood = "deviance";
     std::vector<std::string> channels;
     std::vector<int> labels;
@@ -85,7 +88,8 @@ void runFit(const FitArgs& a) {
     const spectra::Database db;
     Scene scene = optics::loadSceneFile(a.scene, db);
     for (const std::string& w : scene.warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
-    const optics::Microscope m = optics::Microscope::fromScene(scene, db);
+    optics::Microscope m = optics::Microscope::fromScene(scene, db);
+    optics::applyStackOverrides(m, scene, a.planes, a.step);
     optics::FitOptions o = fitOptions(a, scene);
     o.log = [](const std::string& line) { std::fprintf(stderr, "fit: %s\n", line.c_str()); };
     const optics::ObservedStack observed = optics::readOmeStack(a.stack);
@@ -234,6 +238,8 @@ void addFitCommands(CLI::App& app) {
     fit->add_option("scene", a->scene, "Scene file: the template (its labelled volume and microscope)")->required()->check(CLI::ExistingFile);
     fit->add_option("--stack", a->stack, "Observed stack (OME-TIFF with Fluorosim's camera metadata, or expected photoelectrons)")->required();
     fit->add_option("-o,--output", a->output, "Output folder: fit.json, fit.log, solver_report.txt, concentrations.vdb, model/residual stacks")->required();
+    fit->add_option("--planes", a->planes, "Planes of the stack, as given to acquire (default: the scene's)");
+    fit->add_option("--step", a->step, "Plane step, as given to acquire, e.g. 1um (default: the scene's)");
     fit->add_option("--params", a->params, "labels (one scale per label) or grid:CELL (e.g. grid:8um)");
     fit->add_option("--channels", a->channels, "Channels to fit (default: every channel of the stack)")->delimiter(',');
     fit->add_option("--scattered", a->scattered, "Scattered light in the model: none, or reestimated (a Monte Carlo render per outer iteration)");

@@ -254,3 +254,55 @@ TEST(ConcentrationFit, MaximumLikelihoodStaysUnbiasedDownToOnePhotonWherePearson
 
 }  // namespace
 }  // namespace fluorosim
+
+namespace fluorosim {
+namespace {
+
+// A stack acquired with the full model (Monte Carlo scattered light, camera noise) of the truth, fitted
+// with the template and the scattered light re-rendered at another seed.
+TEST(ConcentrationFit, StacksWithScatteredLightFitWithinFivePercent) {
+    testing::FitSceneOptions truthOptions{{4, 12, 7}};
+    truthOptions.sigmaSPerMm = 2;
+    truthOptions.power488mW = truthOptions.power561mW = 0.002;  // a few hundred photoelectrons at the brightest pixels
+    FitSetup truth(truthOptions);
+    optics::AcquireOptions a;
+    a.spp = 64;
+    a.seed = 1;
+    optics::Stack stack = optics::emptyStack(truth.microscope, {0, 1});
+    ASSERT_TRUE(optics::acquireStack(truth.scene, truth.microscope, stack, a));
+    double peak = 0;
+    for (float e : stack.expected) peak = std::max(peak, double(e));
+    testing::FitSceneOptions templateOptions;
+    templateOptions.sigmaSPerMm = 2;
+    templateOptions.power488mW = templateOptions.power561mW = 0.002;
+    FitSetup s(templateOptions);
+    optics::FitData d;
+    d.channels = {0, 1};
+    d.values.assign(stack.counts.begin(), stack.counts.end());
+    d.adu = true;
+    d.noise = s.noise;
+    optics::FitOptions o;
+    o.start = kStart;
+    o.scattered = optics::ScatteredModel::Reestimated;
+    o.scatteredSpp = 64;
+    o.acquisition.seed = 2;
+    o.outerIterations = 6;
+    o.outerTolerance = 1e-3;
+    const optics::FitResult r = optics::fitConcentrations(s.scene, s.microscope, d, o);
+    std::printf("  peak %.0f e-; %d outer iterations, deviance / dof %.3f\n", peak, r.outerIterations, r.deviance / r.degreesOfFreedom);
+    for (size_t j = 0; j < kTruth.size(); ++j) {
+        const auto& p = r.parameters[j];
+        std::printf("  %s: theta %.4f +- %.4f (truth %.2f): %+.2f %%\n", p.parameter.name.c_str(), p.theta, p.standardError, kTruth[j], 100 * (p.theta / kTruth[j] - 1));
+        EXPECT_NEAR(p.theta, kTruth[j], 0.05 * kTruth[j]);
+    }
+    // Ratios between labels.
+    for (size_t a1 = 0; a1 < kTruth.size(); ++a1)
+        for (size_t b = a1 + 1; b < kTruth.size(); ++b) {
+            const double ratio = r.parameters[a1].theta / r.parameters[b].theta, truthRatio = kTruth[a1] / kTruth[b];
+            std::printf("  ratio %zu/%zu: %.4f (truth %.4f): %+.2f %%\n", a1 + 1, b + 1, ratio, truthRatio, 100 * (ratio / truthRatio - 1));
+            EXPECT_NEAR(ratio, truthRatio, 0.02 * truthRatio);
+        }
+}
+
+}  // namespace
+}  // namespace fluorosim

@@ -206,3 +206,65 @@ def test_the_gil_is_released_while_rendering():
     # With the GIL held for the whole render this loop would run once or twice.
     assert seconds[0] > 0.05, "the render was too short to tell"
     assert ticks > 10, f"{ticks} ticks during a {seconds[0]:.2f} s render"
+
+
+def test_fit_gives_the_cli_numbers_from_a_file_and_from_an_array(tmp_path):
+    # The beads as one parameter (a homogeneous dyed medium: --unlabelled), fitted back from their own stack.
+    scene = tmp_path / "beads.json"
+    scene.write_text(json.dumps(beads()))
+    stack = tmp_path / "s.ome.tif"
+    run = cli("acquire", scene, "-o", stack, "--planes", "4", "--spp", "4", "--seed", "3", "--step", "1um")
+    assert run.returncode == 0, run.stderr
+    run = cli("fit", scene, "--stack", stack, "--planes", "4", "--step", "1um", "--unlabelled", "-o", tmp_path / "fit")
+    assert run.returncode == 0, run.stderr
+    cli_fit = json.loads((tmp_path / "fit" / "fit.json").read_text())
+    for name in ["model.ome.tif", "residual.ome.tif", "normalised_residual.ome.tif", "fit.log", "solver_report.txt"]:
+        assert (tmp_path / "fit" / name).exists(), name
+    assert [p["medium"] for p in cli_fit["parameters"]] == ["bead"]
+    from_file = fluorosim.fit(str(scene), stack, planes=4, step="1um", unlabelled=True)
+    assert from_file["theta"][0] == pytest.approx(cli_fit["parameters"][0]["theta"], rel=1e-12)
+    assert from_file["standard_error"][0] == pytest.approx(cli_fit["parameters"][0]["standard_error"], rel=1e-9)
+    # The stack's own metadata, read by tifffile, and its pixels as an array: the same fit.
+    with tifffile.TiffFile(stack) as f:
+        counts = f.asarray().reshape(1, 4, 16, 16)
+    camera = {"sensor": "sCMOS", "gain_e_per_adu": 0.46, "offset_adu": 100, "read_noise_e": 1.4}
+    from_array = fluorosim.fit(str(scene), counts, planes=4, step="1um", unlabelled=True, stack_channels=["AF488"],
+                               pixel_size_um=0.40625, z_step_um=1.0, camera=camera)
+    assert from_array["theta"][0] == pytest.approx(from_file["theta"][0], rel=1e-12)
+    assert from_array["model"].shape == (1, 4, 16, 16)
+    # The beads were acquired at the scene's concentration: the fit finds it within its own error and
+    # the camera's noise (the scattered light of clear water is nil).
+    assert abs(from_file["theta"][0] - 1) < 4 * from_file["standard_error"][0] + 0.01
+
+
+def test_fit_and_gradient_refuse_bad_input_with_the_cli_messages(tmp_path):
+    scene = tmp_path / "beads.json"
+    scene.write_text(json.dumps(beads()))
+    stack = tmp_path / "s.ome.tif"
+    assert cli("acquire", scene, "-o", stack, "--planes", "2", "--spp", "1", "--step", "1um").returncode == 0
+    # The stack has 2 planes; the scene's microscope another count.
+    run = cli("fit", scene, "--stack", stack, "--unlabelled", "-o", tmp_path / "fit")
+    assert run.returncode == 2 and "SizeZ" in run.stderr and len(run.stderr.strip().splitlines()) == 1, run.stderr
+    with pytest.raises(ValueError, match="SizeZ"):
+        fluorosim.fit(str(scene), stack, unlabelled=True)
+    with pytest.raises(ValueError, match="params"):
+        fluorosim.fit(str(scene), stack, planes=2, step="1um", params="voxels")
+    with pytest.raises(ValueError, match="label_grid"):
+        fluorosim.fit(str(scene), stack, planes=2, step="1um")
+    with pytest.raises(ValueError, match="stack"):
+        fluorosim.fit(str(scene), np.zeros((2, 2)))
+
+
+def test_gradient_columns_match_the_cli(tmp_path):
+    scene = tmp_path / "beads.json"
+    scene.write_text(json.dumps(beads()))
+    out = tmp_path / "g.ome.tif"
+    run = cli("gradient", scene, "--params", "grid:4um", "-o", out)
+    assert run.returncode == 0, run.stderr
+    index = json.loads((tmp_path / "g.json").read_text())
+    g = fluorosim.gradient(str(scene), params="grid:4um")
+    assert g["columns"].shape[0] == len(index["parameters"]) == len(g["parameters"])
+    with tifffile.TiffFile(out) as f:
+        cli_columns = f.asarray().reshape(g["columns"].shape)
+    np.testing.assert_array_equal(cli_columns, g["columns"])
+    assert (g["columns"] >= -1e-6 * g["columns"].max()).all()
