@@ -9,7 +9,9 @@
 #include <numeric>
 #include <random>
 
+#include "core/errors.h"
 #include "optics/concentration_fit.h"
+#include "optics/stack_files.h"
 #include "optics/detector.h"
 #include "optics/scene_files.h"
 #include "support/fit_scenes.h"
@@ -302,6 +304,137 @@ TEST(ConcentrationFit, StacksWithScatteredLightFitWithinFivePercent) {
             std::printf("  ratio %zu/%zu: %.4f (truth %.4f): %+.2f %%\n", a1 + 1, b + 1, ratio, truthRatio, 100 * (ratio / truthRatio - 1));
             EXPECT_NEAR(ratio, truthRatio, 0.02 * truthRatio);
         }
+}
+
+}  // namespace
+}  // namespace fluorosim
+
+namespace fluorosim {
+namespace {
+
+// Each bad observation gets one line naming the file, the field and both values.
+TEST(FitData, RefusesStacksThatDoNotMatchTheScene) {
+    FitSetup s;
+    auto observed = [&] {
+        optics::ObservedStack o;
+        o.path = "obs.ome.tif";
+        o.width = o.height = 40;
+        o.planes = 2;
+        o.channels = 2;
+        o.channelNames = {"AF488", "AF594"};
+        o.pixelSizeUm = s.microscope.pixelSizeMm() * 1e3;
+        o.zStepUm = 1;
+        o.exposureS = s.microscope.detector.exposureS;
+        o.values = "adu";
+        o.integerPixels = true;
+        o.camera = optics::cameraMetadata(s.microscope.detector);
+        o.data.assign(40 * 40 * 2 * 2, 100.0);
+        return o;
+    };
+    const optics::FitOptions options;
+    EXPECT_NO_THROW(optics::fitData(observed(), s.microscope, options));
+    auto expectError = [&](optics::ObservedStack o, const std::string& part, optics::FitOptions opts = {}) {
+        try {
+            optics::fitData(o, s.microscope, opts);
+            ADD_FAILURE() << "no error; expected one with \"" << part << "\"";
+        } catch (const ConfigError& e) {
+            const std::string what = e.what();
+            EXPECT_NE(what.find("obs.ome.tif"), std::string::npos) << what;
+            EXPECT_NE(what.find(part), std::string::npos) << what;
+            EXPECT_EQ(what.find('\n'), std::string::npos) << what;
+            std::printf("  %s\n", what.c_str());
+        }
+    };
+    auto o = observed();
+    o.width = 41;
+    o.data.resize(41 * 40 * 4);
+    expectError(o, "size 41 x 40");
+    o = observed();
+    o.pixelSizeUm = 0.65;
+    expectError(o, "PhysicalSizeX 0.65 um");
+    o = observed();
+    o.zStepUm = 2;
+    expectError(o, "PhysicalSizeZ 2 um");
+    o = observed();
+    o.planes = 3;
+    o.data.resize(40 * 40 * 3 * 2);
+    expectError(o, "SizeZ 3 planes");
+    o = observed();
+    o.channelNames = {"GFP", "AF594"};
+    expectError(o, "no channel named \"AF488\"", [] {
+        optics::FitOptions f;
+        f.channels = {"AF488"};
+        return f;
+    }());
+    expectError(o, "channel \"GFP\" is not a channel of the scene's microscope");
+    o = observed();
+    o.camera->sensor = "EMCCD";
+    expectError(o, "camera EMCCD");
+    o = observed();
+    o.camera.reset();
+    expectError(o, "no camera metadata");
+    o = observed();
+    o.values.clear();
+    o.camera.reset();
+    expectError(o, "no camera metadata");
+    o = observed();
+    o.data[123] = std::nan("");
+    expectError(o, "is nan");
+    o = observed();
+    o.data[7] = 10;  // 90 ADU below the offset: 41 e-, far beyond the read noise
+    expectError(o, "below the offset");
+}
+
+TEST(ConcentrationFit, RefusesUnknownAndEmptyLabels) {
+    FitSetup s;
+    optics::FitData d;
+    d.channels = {0};  // AF488 alone: label 2 (AF594) holds no dye it sees well
+    d.values.assign(40 * 40 * 2, 100.0);
+    d.noise = s.noise;
+    optics::FitOptions o;
+    o.labels = {7};
+    try {
+        optics::fitConcentrations(s.scene, s.microscope, d, o);
+        ADD_FAILURE() << "label 7 does not exist";
+    } catch (const ConfigError& e) {
+        std::printf("  %s\n", e.what());
+        EXPECT_NE(std::string(e.what()).find("label 7"), std::string::npos);
+        EXPECT_NE(std::string(e.what()).find("labels with dye: 1, "), std::string::npos);
+    }
+    o.labels = {0};
+    EXPECT_THROW(optics::fitConcentrations(s.scene, s.microscope, d, o), ConfigError);
+}
+
+TEST(ObservedStack, ReadsItsOwnStacksAndRefusesOtherFiles) {
+    TempDir dir;
+    optics::StackMetadata meta;
+    meta.pixelSizeUm = 0.40625;
+    meta.zStepUm = 1.5;
+    meta.exposureS = 0.02;
+    meta.channels = {{"AF488", 488, 525}, {"AF594", 561, 609}};
+    meta.camera = optics::CameraMetadata{};
+    meta.camera->readNoiseElectrons = 1.6;
+    std::vector<uint16_t> data(5 * 4 * 3 * 2);
+    for (size_t i = 0; i < data.size(); ++i) data[i] = static_cast<uint16_t>(100 + i);
+    const auto path = dir.path() / "s.ome.tif";
+    optics::writeOmeTiffUint16(path, 5, 4, 3, 2, data, meta);
+    const optics::ObservedStack s = optics::readOmeStack(path);
+    EXPECT_EQ(s.width, 5);
+    EXPECT_EQ(s.height, 4);
+    EXPECT_EQ(s.planes, 3);
+    EXPECT_EQ(s.channels, 2);
+    EXPECT_EQ(s.channelNames, (std::vector<std::string>{"AF488", "AF594"}));
+    EXPECT_DOUBLE_EQ(s.pixelSizeUm, 0.40625);
+    EXPECT_DOUBLE_EQ(s.zStepUm, 1.5);
+    EXPECT_DOUBLE_EQ(s.exposureS, 0.02);
+    ASSERT_TRUE(s.camera);
+    EXPECT_DOUBLE_EQ(s.camera->readNoiseElectrons, 1.6);
+    EXPECT_EQ(s.values, "adu");
+    EXPECT_EQ(s.at(1, 2, 3, 4), 100 + ((1 * 3 + 2) * 4 + 3) * 5 + 4);
+    // A missing file and a PNG (a TIFF without OME-XML: tests/python, written by tifffile).
+    EXPECT_THROW(optics::readOmeStack(dir.path() / "missing.ome.tif"), IoError);
+    std::ofstream(dir.path() / "image.png") << "\x89PNG\r\n";
+    EXPECT_THROW(optics::readOmeStack(dir.path() / "image.png"), IoError);
 }
 
 }  // namespace

@@ -253,6 +253,12 @@ def test_fit_and_gradient_refuse_bad_input_with_the_cli_messages(tmp_path):
         fluorosim.fit(str(scene), stack, planes=2, step="1um")
     with pytest.raises(ValueError, match="stack"):
         fluorosim.fit(str(scene), np.zeros((2, 2)))
+    plain = tmp_path / "plain.tif"
+    tifffile.imwrite(plain, np.zeros((2, 16, 16), np.uint16))
+    with pytest.raises(ValueError, match="not an OME-TIFF"):
+        fluorosim.fit(str(scene), plain, planes=2, step="1um", unlabelled=True)
+    run = cli("fit", scene, "--stack", plain, "--planes", "2", "--step", "1um", "--unlabelled", "-o", tmp_path / "fit2")
+    assert run.returncode == 2 and "not an OME-TIFF" in run.stderr, run.stderr
 
 
 def test_gradient_columns_match_the_cli(tmp_path):
