@@ -526,22 +526,50 @@ LinearPoissonFit::Solution LinearPoissonFit::solve(const std::vector<double>& ob
     s.pixels = used.size();
     const std::vector<Impl::Block> bs = m.blocks(used);
     if (m.map->isGrid() && alpha < 0) {
-        // The discrepancy rule: the largest α whose data deviance stays within two standard deviations of
-        // its expectation, N (1 + 2 √(2/N)), searched over decades from warm starts.
+        // The discrepancy rule (Morozov): the largest α whose Pearson statistic Σ (x − λ)²/λ stays within two
+        // standard deviations of its expectation N under the camera model, N (1 + 2 √(2/N)). (The deviance's
+        // own expectation is not N where read noise dominates: about 1.25 per pixel at λ = 2.) The statistic
+        // grows with α, so log α is bisected between a scale of the data's curvature (the median diagonal of
+        // AᵀWA) times 1e-8 and 1e3, each solve warm-started from the last.
         const double n = static_cast<double>(used.size());
         const double target = n * (1 + 2 * std::sqrt(2 / std::max(n, 1.0)));
+        std::vector<double> diagonal(m.params, 0.0);
+        for (uint32_t q : used) {
+            const double w = 1 / std::max(noise.scaledMean(m.mean(q, theta)), noise.scaledMinimum());
+            for (uint32_t e = m.start[q]; e < m.start[q + 1]; ++e) diagonal[m.col[e]] += m.value[e] * m.value[e] * w;
+        }
+        std::nth_element(diagonal.begin(), diagonal.begin() + static_cast<std::ptrdiff_t>(diagonal.size() / 2), diagonal.end());
+        const double scale = std::max(diagonal[diagonal.size() / 2], 1e-300) / (noise.excessNoiseFactorSquared * noise.excessNoiseFactorSquared);
+        auto pearson = [&](const std::vector<double>& t) {
+            double c = 0;
+            for (uint32_t q : used) {
+                const double l = std::max(noise.scaledMean(m.mean(q, t)), noise.scaledMinimum());
+                c += (x[q] - l) * (x[q] - l) / l;
+            }
+            return c;
+        };
+        double lo = std::log(scale * 1e-8), hi = std::log(scale * 1e3);
+        std::vector<double> trial = theta, best = theta;
         double chosen = 0;
-        std::vector<double> trial = theta;
-        for (double a = 1e6; a >= 1e-6; a /= 10) {
-            const Impl::Run r = m.run(bs, x, trial, a, outer, log);
-            s.iterations += r.iterations;
-            if (m.dataDeviance(used, x, trial) <= target) {
-                chosen = a;
-                theta = trial;
-                break;
+        // The unregularised fit first: if even it misses the target, no α helps.
+        s.iterations += m.run(bs, x, trial, 0.0, outer, log).iterations;
+        if (pearson(trial) <= target) {
+            best = trial;
+            for (int step = 0; step < 10; ++step) {
+                const double mid = 0.5 * (lo + hi);
+                std::vector<double> t = best;
+                s.iterations += m.run(bs, x, t, std::exp(mid), outer, log).iterations;
+                if (pearson(t) <= target) {
+                    lo = mid;
+                    chosen = std::exp(mid);
+                    best = t;
+                } else {
+                    hi = mid;
+                }
             }
         }
         alpha = chosen;
+        theta = best;
     }
     alpha = std::max(alpha, 0.0);
     const Impl::Run r = m.run(bs, x, theta, m.map->isGrid() ? alpha : 0.0, outer, log);
@@ -567,6 +595,15 @@ LinearPoissonFit::Solution LinearPoissonFit::solve(const std::vector<double>& ob
         for (uint32_t e = m.start[q]; e < m.start[q + 1]; ++e) gradient[m.col[e]] += 2 * d.r * d.dr * m.value[e] / noise.excessNoiseFactorSquared;
     }
     for (size_t j = 0; j < m.params; ++j) s.atBound[j] = theta[j] <= 1e-12 && gradient[j] > 0;
+    // The conditional SNR θ_j √I_jj, I = Σ a aᵀ / (F⁴ λ).
+    s.snr.assign(m.params, 0.0);
+    {
+        std::vector<double> diagonal(m.params, 0.0);
+        const double f2 = noise.excessNoiseFactorSquared;
+        for (uint32_t q : used)
+            for (uint32_t e = m.start[q]; e < m.start[q + 1]; ++e) diagonal[m.col[e]] += m.value[e] * m.value[e] / (f2 * f2 * lambda[q]);
+        for (size_t j = 0; j < m.params; ++j) s.snr[j] = theta[j] * std::sqrt(diagonal[j]);
+    }
     if (!uncertainties) return s;
 
     // The covariance of the Fisher-weighted residuals (x − λ(θ))/√λ̂ at the fit, with held parameters fixed.
@@ -766,6 +803,7 @@ FitResult fitConcentrations(Scene& scene, const Microscope& m, const FitData& da
         p.theta = theta[j];
         p.standardError = final.standardError[j];
         p.cramerRao = final.cramerRao[j];
+        p.snr = final.snr[j];
         p.atBound = final.atBound[j];
         p.concentrationUm = p.theta * p.parameter.referenceMolar * 1e6;
         p.concentrationStandardErrorUm = p.standardError * p.parameter.referenceMolar * 1e6;

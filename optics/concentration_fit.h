@@ -46,7 +46,8 @@ struct FitOptions {
     int maxIterations = 100;          // trust-region iterations per outer iteration
     std::optional<std::vector<double>> start;  // starting θ (1 = the scene's concentrations); default all 1
     // Grid only: a Tikhonov prior on the gradient of θ between neighbouring nodes, weight α (residual
-    // √α (θ_a − θ_b)); none picks α by the discrepancy rule, the largest α with deviance/N <= 1 + 2/√N.
+    // √α (θ_a − θ_b)); none picks α by the discrepancy rule, the largest α whose Pearson statistic at the
+    // fit stays within N (1 + 2 √(2/N)) over the N fitted pixels.
     std::optional<double> priorWeight;
     double saturationSigmas = 6;      // pixels within this many noise sigmas of the full well are left out
     AcquireOptions acquisition;       // the model's quadrature, PSF, seed and threads (also the scattered render)
@@ -82,7 +83,8 @@ struct FittedParameter {
     FitParameter parameter;
     double theta = 0;            // the scale of the template (1 = the scene's concentrations)
     double standardError = 0;    // of θ, from the covariance at the fit
-    double cramerRao = 0;        // √ of the inverse Fisher information's diagonal at the fit
+    double cramerRao = 0;        // √ of the inverse Fisher information's diagonal at the fit (the data alone)
+    double snr = 0;              // θ √I_jj: what the data alone say of θ_j with the others held (0 at the bound)
     double concentrationUm = 0;  // θ × the template's reference concentration, µM
     double concentrationStandardErrorUm = 0;
     bool atBound = false;        // held at θ = 0: its error is not a Gaussian one
@@ -129,7 +131,7 @@ public:
                      const FitOptions& options);
     ~LinearPoissonFit();
     struct Solution {
-        std::vector<double> theta, standardError, cramerRao;  // errors 0 where not reported
+        std::vector<double> theta, standardError, cramerRao, snr;  // errors 0 where not reported
         std::vector<bool> atBound;
         double deviance = 0, chi2 = 0, priorWeight = 0;
         size_t pixels = 0, saturatedPixels = 0;

@@ -328,6 +328,7 @@ py::dict fitStack(const py::object& sceneArg, const py::object& stackArg, std::o
         d["theta"] = p.theta;
         d["standard_error"] = p.standardError;
         d["cramer_rao_bound"] = p.cramerRao;
+        d["snr"] = p.snr;
         d["concentration_uM"] = p.concentrationUm;
         d["concentration_standard_error_uM"] = p.concentrationStandardErrorUm;
         d["at_bound"] = p.atBound;

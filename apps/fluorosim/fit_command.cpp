@@ -111,6 +111,7 @@ void runFit(const FitArgs& a) {
         j["theta"] = p.theta;
         j["standard_error"] = p.standardError;
         j["cramer_rao_bound"] = p.cramerRao;
+        j["snr"] = p.snr;
         j["concentration_uM"] = p.concentrationUm;
         j["concentration_standard_error_uM"] = p.concentrationStandardErrorUm;
         j["at_bound"] = p.atBound;

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <string>
 
 #include "volume/density_grid.h"
@@ -23,6 +24,8 @@ struct FitSceneOptions {
     double power488mW = 0.05, power561mW = 0.05;
     double exposureS = 0.02;
     int spp = 4;
+    // A factor on every rod's concentration along x (µm), e.g. a gradient; 1 by default.
+    std::function<double(double)> profile;
 };
 
 inline std::string fitSceneJson(const FitSceneOptions& o) {
@@ -84,12 +87,13 @@ inline std::pair<double, int> fitRodVoxel(const FitSceneOptions& o, int i, int j
     auto coverage = [&](double d) { return std::clamp((r + 0.25 - d) / 0.5, 0.0, 1.0); };
     if (!af594) {
         const double d1 = std::hypot(y + 3, z - 0.2), d3 = std::hypot(y - 5, z - 0.4);
-        if (x >= -10 && x <= 10 && coverage(d1) > 0) return {o.concentrationsUm[0] * coverage(d1), 1};
-        if (x >= -10 && x <= -1 && coverage(d3) > 0) return {o.concentrationsUm[2] * coverage(d3), 3};
+        if (x >= -10 && x <= 10 && coverage(d1) > 0)
+            return {o.concentrationsUm[0] * coverage(d1) * (o.profile ? o.profile(x) : 1.0), 1};
+        if (x >= -10 && x <= -1 && coverage(d3) > 0) return {o.concentrationsUm[2] * coverage(d3) * (o.profile ? o.profile(x) : 1.0), 3};
         return {0, 0};
     }
     const double d2 = std::hypot(x - 3, z + 0.3);
-    if (y >= 0 && y <= 10 && coverage(d2) > 0) return {o.concentrationsUm[1] * coverage(d2), 2};
+    if (y >= 0 && y <= 10 && coverage(d2) > 0) return {o.concentrationsUm[1] * coverage(d2) * (o.profile ? o.profile(x) : 1.0), 2};
     return {0, 0};
 }
 
