@@ -318,6 +318,38 @@ ParameterMap makeMap(const Scene& scene, const StackOperator& op, const FitOptio
                 peak[j] = std::max(peak[j], c);
             }
         }
+    // A label's reference is the value most of its voxels share (those it covers whole: the neuron's own
+    // concentration for voxelized neurons), not its largest lattice point, which a thin neurite never fills,
+    // nor its largest voxel, where neurons sharing a grid overlap and add up.
+    std::vector<std::map<float, size_t>> counts(map.size());
+    if (!map.isGrid())
+        for (size_t med = 0; med < scene.media.size(); ++med) {
+            const VolumeFields* v = scene.media[med].volume();
+            if (!v || !v->labels()) continue;
+            for (int c = kFirstDyeChannel; c < v->channelCount(); ++c) {
+                const VolumeChannel& ch = v->channel(c);
+                if (!ch.grid) continue;
+                std::vector<float> values, labels;
+                ch.grid->forEachBlock([&](const IndexBox& box, double) {
+                    const size_t n = static_cast<size_t>(box.hi[0] - box.lo[0] + 1) * static_cast<size_t>(box.hi[1] - box.lo[1] + 1) *
+                                     static_cast<size_t>(box.hi[2] - box.lo[2] + 1);
+                    if (n > (size_t(1) << 24)) return;  // a huge tile: uniform dye, no label boundary to resolve
+                    values.resize(n);
+                    labels.resize(n);
+                    ch.grid->copyVoxels(box, values.data());
+                    v->labels()->copyVoxels(box, labels.data());
+                    for (size_t i = 0; i < n; ++i) {
+                        const int param = map.parameterOf({static_cast<int32_t>(med), static_cast<int32_t>(labels[i])});
+                        if (param >= 0 && values[i] > 0) ++counts[static_cast<size_t>(param)][static_cast<float>(ch.offset + ch.scale * values[i])];
+                    }
+                });
+            }
+        }
+    for (size_t j = 0; j < map.size(); ++j) {
+        size_t best = 1;
+        for (const auto& [value, n] : counts[j])
+            if (n > best) best = n, peak[j] = value;
+    }
     for (size_t j = 0; j < map.size(); ++j) {
         FitParameter& p = map.parameters()[j];
         p.referenceMolar = peak[j];

@@ -25,7 +25,7 @@ struct FitParameter {
     bool node = false;          // a grid node (else a label)
     std::array<int, 3> cell{};  // grid: the node's index
     Vec3 centreMm;              // where it is (the label's or node's position in the world)
-    double referenceMolar = 0;  // the template's largest concentration it scales (reports it in µM)
+    double referenceMolar = 0;  // what θ = 1 means: labels, the value most of their voxels share; nodes, the template's peak (reports θ in µM)
 };
 
 class ParameterMap {

@@ -128,6 +128,7 @@ WidefieldPsf::Table buildTable(const PupilOptions& pupil, const PsfTableOptions&
             sis += weight[n] * (di[n] - mi / wsum) * (ds[n] - ms / wsum);
         }
         const double f = sss / sis;
+        t.focusScale = f;
         const double kd = waveNumberPerMm(lambdaNm) * pupil.depthMm;
         for (size_t n = 0; n < N; ++n) fixedPhase[n] = kd * (ds[n] - f * di[n]);
     }
@@ -148,7 +149,9 @@ WidefieldPsf::Table buildTable(const PupilOptions& pupil, const PsfTableOptions&
         const double w = (static_cast<double>(j) - half) * o.dw;
         std::vector<double> re(N), im(N);
         for (size_t n = 0; n < N; ++n) {
-            const double phase = w * pupil.sampleIndex * cosS[n] + fixedPhase[n];
+            // A point dz toward the objective lies at depth d − dz: its sample path shortens as the fixed
+            // term's lengthens (Gibson–Lanni: k [(d − dz) n_s cos θ_s − f d n_i cos θ_i]).
+            const double phase = -w * pupil.sampleIndex * cosS[n] + fixedPhase[n];
             re[n] = c[n] * std::cos(phase);
             im[n] = c[n] * std::sin(phase);
         }
@@ -349,6 +352,17 @@ double WidefieldPsf::enclosed(double dzMm, double lambdaNm) const {
         const int j = std::min(static_cast<int>(x), t.nw - 2);
         return lerp(x - j, t.enclosed[static_cast<size_t>(j)], t.enclosed[static_cast<size_t>(j) + 1]);
     });
+}
+
+double WidefieldPsf::pupilPhase(double rho, double dzMm, double lambdaNm) const {
+    const double k = waveNumberPerMm(lambdaNm);
+    const double ds = pupil_.sampleIndex * std::sqrt(1 - sqr(pupil_.na * rho / pupil_.sampleIndex));
+    double phase = -k * dzMm * ds;
+    if (!pupil_.matched()) {
+        const double di = pupil_.immersionIndex * std::sqrt(1 - sqr(pupil_.na * rho / pupil_.immersionIndex));
+        phase += k * pupil_.depthMm * (ds - focusScale() * di);
+    }
+    return phase;
 }
 
 double WidefieldPsf::cutRadiusMm(double lambdaNm) const { return (tables_[0].nv - 1) * table_.dv / (waveNumberPerMm(lambdaNm) * pupil_.na); }

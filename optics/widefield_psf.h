@@ -7,9 +7,12 @@
 // distance r from the geometric image point and axial offset dz (toward the objective) from the plane
 // of focus images with the amplitude
 //     U(v, w) = ∫0^1 A(ρ) exp(i Φ(ρ, w)) J0(v ρ) ρ dρ,   v = k NA r, w = k dz,
-//     Φ = w n_s cos θ_s                                  (matched indices),
-//     Φ = w n_s cos θ_s + k d (n_s cos θ_s − f n_i cos θ_i)  (focus at depth d below an index step; f
-//         places the plane of focus at the least-squares best focus of the aberration over the pupil),
+//     Φ = −w n_s cos θ_s                                  (matched indices),
+//     Φ = −w n_s cos θ_s + k d (n_s cos θ_s − f n_i cos θ_i)  (focus at depth d below an index step: a
+//         point dz toward the objective lies at depth d − dz; f d is the objective's nominal focus depth in
+//         the immersion medium, placing the plane of focus at the least-squares best focus of the
+//         aberration over the pupil: tests/optics/widefield_psf_test.cpp checks the paraxial and marginal
+//         foci against ray tracing),
 // A(ρ) = sqrt(a(θ_s)) with a the intensity apodisation (the medium's attenuation over the cone), and no
 // aplanatic sqrt(cos θ) factor. The intensity h = |U|² is normalised by Parseval so that its integral over
 // the whole plane is 1 at every dz; the model PSF is h cut at v = vCut (the light beyond, about 2/(π vCut)
@@ -65,6 +68,10 @@ public:
     double displacementDensity(double rMm, double lambdaNm) const;
     double geometricDensity(double rMm, double dzMm, double lambdaNm) const;  // h_geo per mm²
     double reweight(double rMm, double dzMm, double lambdaNm) const;         // density / geometricDensity; 1 beyond maxDz
+    // Under a mismatch, f: the objective's nominal focus lies f d deep in immersion-medium terms (1 matched).
+    double focusScale() const { return tables_.empty() ? 1.0 : tables_.front().focusScale; }
+    // The pupil phase Φ(ρ, dz) at ρ in [0, 1] (radians), as the tables use it.
+    double pupilPhase(double rho, double dzMm, double lambdaNm) const;
     // Full width at half maximum of the in-focus Airy pattern, 0.5145 λ/NA.
     static double fwhmInFocusMm(double lambdaNm, double na);
 
@@ -85,6 +92,7 @@ public:
         // The displacement density g: the in-focus row, linear in v between nodes, per unit v-area
         // (normalised on v <= vCut), and its cumulative mass at each node.
         std::vector<double> g, cdf;
+        double focusScale = 1;
     };
 
 private:

@@ -38,7 +38,8 @@ std::complex<double> bruteAmplitude(const PupilOptions& p, double v, double w, d
     for (int i = 0; i <= n; ++i) {
         const double rho = double(i) / n, weight = (i == 0 || i == n) ? 1 : (i % 2 ? 4 : 2);
         const double cosS = std::sqrt(1 - sqr(p.na * rho / p.sampleIndex));
-        const double phase = w * p.sampleIndex * cosS + (extraPhasePerRho ? extraPhasePerRho(rho) : 0.0);
+        // A point w = k dz toward the objective is k dz nearer: its sample path is shorter.
+        const double phase = -w * p.sampleIndex * cosS + (extraPhasePerRho ? extraPhasePerRho(rho) : 0.0);
         sum += weight * std::polar(rho * std::cyl_bessel_j(0.0, v * rho), phase);
     }
     return sum / (3.0 * n);
@@ -185,6 +186,33 @@ TEST(WidefieldPsf, MismatchReducesToTheMatchedCaseAndAgreesWithBruteForce) {
         }
     std::printf("  n_s 1.45 under water, 100 um deep: largest error against brute force %.2e of the peak\n", worst);
     EXPECT_LT(worst, 3e-3);
+    // The paraxial and marginal foci against ray tracing. A ray leaving an on-axis point at depth z in the
+    // sample at angle θ_s refracts into θ_i; traced back through the immersion medium it meets the axis at
+    // depth z tan θ_s / tan θ_i: the objective (nominally focused f d deep) sees the zone of that ray in
+    // focus for the point at z = f d tan θ_i / tan θ_s, i.e. at dz = d − z toward the objective. In the
+    // phase the same zone is stationary where ∂Φ/∂ρ = 0.
+    {
+        const double fd = psf.focusScale() * p.depthMm;
+        auto rayTraced = [&](double rho) {
+            const double sinS = p.na * rho / p.sampleIndex, sinI = p.na * rho / p.immersionIndex;
+            const double ratio = rho < 1e-6 ? p.sampleIndex / p.immersionIndex : (sinI / std::sqrt(1 - sinI * sinI)) / (sinS / std::sqrt(1 - sinS * sinS));
+            return p.depthMm - fd * ratio;
+        };
+        auto stationary = [&](double rho) {  // dz where ∂Φ/∂ρ = 0 (Φ is linear in dz)
+            const double h = 1e-6;
+            const double r = std::max(rho, 1e-3);
+            const double a = (psf.pupilPhase(r + h, 0, 520) - psf.pupilPhase(r - h, 0, 520)) / (2 * h);
+            const double b = (psf.pupilPhase(r + h, 1e-3, 520) - psf.pupilPhase(r - h, 1e-3, 520)) / (2 * h) - a;  // per mm of dz, × 1e-3
+            return -a / b * 1e-3;
+        };
+        for (double rho : {1e-3, 0.5, 0.999}) {
+            std::printf("  zone rho %.3f: in focus at dz %+.4f um (phase), %+.4f um (ray tracing)\n", rho, stationary(rho) * 1e3, rayTraced(rho) * 1e3);
+            EXPECT_NEAR(stationary(rho), rayTraced(rho), 2e-6) << "rho " << rho;
+        }
+        // The figures: paraxial focus 1.84 um toward the objective, marginal 2.47 um away from it.
+        EXPECT_NEAR(rayTraced(0) * 1e3, 1.845, 0.01);
+        EXPECT_NEAR(rayTraced(1) * 1e3, -2.475, 0.01);
+    }
     // A spherical aberration makes the axial profile asymmetric about the best focus.
     const double asymmetry = std::abs(psf.tableDensity(0, 15, 520) - psf.tableDensity(0, -15, 520)) / peak;
     std::printf("  axial asymmetry at w = ±15: %.3f of the peak\n", asymmetry);
