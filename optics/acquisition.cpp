@@ -44,6 +44,7 @@ void AcquireOptions::validate() const {
         throw ConfigError("adaptive sampling needs max spp >= spp and at least 2 pilot samples, got max " + std::to_string(maxSpp) + ", spp " +
                           std::to_string(spp) + ", pilot " + std::to_string(pilotSpp));
     if (!(poolingFraction >= 0 && poolingFraction <= 1)) throw ConfigError("pooling fraction must lie in [0, 1], got " + std::to_string(poolingFraction));
+    if (labels && labelCount < 1) throw ConfigError("a label tally needs at least one label");
     unscattered.validate();
     psf.validate();
 }
@@ -202,6 +203,7 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         std::array<std::vector<double>, kImageLevels> pooledSum, pooledVariance;
     };
     std::vector<RowTotals> rows(static_cast<size_t>(height));
+    if (o.labels) r.labelledElectrons.assign(static_cast<size_t>(o.labelCount), std::vector<double>(r.electrons.size(), 0.0));
     std::vector<double> largestInPixel(r.electrons.size(), 0.0);  // largest per-pixel path sample
     // Dark electrons of the exposure: part of the camera noise an adaptive target is relative to.
     const double darkElectrons = detector.darkCurrentElectronsPerS * detector.exposureS;
@@ -216,10 +218,11 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
             PixelTally paths;
             double largest = 0, largestOwn = 0;
             const auto t0 = std::chrono::steady_clock::now();
-            // A sample's electrons, and the parts of them pooled at each level.
+            // A sample's electrons, the parts of them pooled at each level, and by label.
             struct Sample {
                 double total = 0;
                 std::array<double, kImageLevels> pooled{};
+                std::vector<std::pair<uint32_t, double>> labelled;
             };
             auto pathSample = [&](uint64_t s) {
                 Rng rng = Rng::forKey(o.seed, streamKey + pixel, s);
@@ -236,8 +239,9 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                     for (int j = 1; j < kNumWavelengths; ++j) pathStart.r_u[j] = psf.displacementDensity(radius, wl.lambda[j]) / hero;
                     pathStart.beta = pathStart.r_u;
                 }
-                const PathImaging pathImaging(imaging, model, emissionPoints.get(), point, o.poolingFraction);
+                const PathImaging pathImaging(imaging, model, emissionPoints.get(), point, o.labels ? 0.0 : o.poolingFraction);
                 pathStart.imaging = &pathImaging;
+                pathStart.labels = o.labels;
                 double cosT = 0;
                 const Ray ray = imaging.cameraRay(focal, rng.uniform(), rng.uniform(), &cosT);
                 const PathRadiance radiance = tracer.radiance(ray, scene.camera.medium, wl, rng, row.stats, pathStart);
@@ -251,8 +255,10 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                 out.total = electrons(radiance.total());
                 for (int k = 1; k < kImageLevels; ++k)
                     if (radiance.pooled[static_cast<size_t>(k)]) out.pooled[static_cast<size_t>(k)] = electrons(radiance.pooled[static_cast<size_t>(k)]);
+                for (const auto& [key, L] : radiance.labelled) out.labelled.push_back({key, electrons(L)});
                 bool finite = std::isfinite(out.total);
                 for (double e : out.pooled) finite = finite && std::isfinite(e);
+                for (const auto& l : out.labelled) finite = finite && std::isfinite(l.second);
                 if (!finite) {
                     ++row.nonFinite;
                     return Sample{};
@@ -274,6 +280,8 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
             std::array<PixelTally, kImageLevels> pooled;
             for (int s = 0; s < n; ++s) {
                 const Sample e = pathSample(static_cast<uint64_t>(s));
+                for (const auto& [key, v] : e.labelled)
+                    if (key < r.labelledElectrons.size()) r.labelledElectrons[key][pixel] += v / n;
                 double own = e.total;  // the part imaged per pixel
                 for (int k = 1; k < kImageLevels; ++k) {
                     own -= e.pooled[static_cast<size_t>(k)];

@@ -52,6 +52,10 @@ struct AcquireOptions {
     int maxSpp = 4096;
     int pilotSpp = 16;
     uint64_t seed = 1;
+    // Tally the paths' re-emissions by label (PlaneImage::labelledElectrons, `labelCount` keys): for fits
+    // of the scattered light. Pooling is off while labels are tallied (every sample stays in its pixel).
+    const EmissionLabels* labels = nullptr;
+    int labelCount = 0;
     int threads = 0;  // 0: all cores
     std::function<void(double)> progress;          // fraction of the current plane, from one thread at a time
     const std::atomic<bool>* cancel = nullptr;     // checked between rows; a cancelled plane is incomplete
@@ -72,6 +76,7 @@ struct PlaneImage {
     uint64_t computedPoints = 0;                  // emission points of the computed part's quadrature
     UnscatteredTimings computedTimings;           // where the computed part's time went
     std::vector<double> computedImage;            // the computed part alone (split estimator; empty otherwise)
+    std::vector<std::vector<double>> labelledElectrons;  // with AcquireOptions::labels: per key, the paths' re-emissions per pixel
     // Paths traced for the estimate and for adaptive sampling's pilots (0 without a noise target).
     uint64_t pathSamples = 0, pilotSamples = 0;
     // Heavy tails: the largest single path's electrons, the largest ratio of a pixel's largest path

@@ -14,6 +14,7 @@
 #include "core/errors.h"
 #include "core/message.h"
 #include "core/units.h"
+#include "optics/emission_labels.h"
 
 namespace fluorosim::optics {
 namespace {
@@ -142,7 +143,9 @@ std::vector<std::pair<int, int>> gridNeighbours(const ParameterMap& map) {
 }  // namespace
 
 const char* fitParametrisationName(FitParametrisation p) { return p == FitParametrisation::Grid ? "grid" : "labels"; }
-const char* scatteredModelName(ScatteredModel s) { return s == ScatteredModel::Reestimated ? "reestimated" : "none"; }
+const char* scatteredModelName(ScatteredModel s) {
+    return s == ScatteredModel::Reestimated ? "reestimated" : s == ScatteredModel::PerLabel ? "labels" : "none";
+}
 const char* fitLikelihoodName(FitLikelihood l) { return l == FitLikelihood::Pearson ? "pearson" : "deviance"; }
 
 void setParametrisation(FitOptions& o, const std::string& text, const std::string& option) {
@@ -161,9 +164,11 @@ void setParametrisation(FitOptions& o, const std::string& text, const std::strin
 }
 
 void setScatteredModel(FitOptions& o, const std::string& text, const std::string& option) {
-    if (text == "none") o.scattered = ScatteredModel::None;
+    if (text == "auto") o.scattered = o.parametrisation == FitParametrisation::Grid ? ScatteredModel::Reestimated : ScatteredModel::PerLabel;
+    else if (text == "none") o.scattered = ScatteredModel::None;
     else if (text == "reestimated") o.scattered = ScatteredModel::Reestimated;
-    else throw ConfigError(option + ": expected \"none\" or \"reestimated\", got \"" + excerpt(text) + "\"");
+    else if (text == "labels") o.scattered = ScatteredModel::PerLabel;
+    else throw ConfigError(option + ": expected \"auto\", \"none\", \"reestimated\" or \"labels\", got \"" + excerpt(text) + "\"");
 }
 
 void setLikelihood(FitOptions& o, const std::string& text, const std::string& option) {
@@ -183,6 +188,8 @@ void FitOptions::validate() const {
     if (!(saturationSigmas >= 0) || !std::isfinite(saturationSigmas)) throw ConfigError("fit: saturation margin must be finite and >= 0, got " + std::to_string(saturationSigmas));
     for (int l : labels)
         if (l <= 0) throw ConfigError("fit: labels must be positive, got " + std::to_string(l));
+    if (parametrisation == FitParametrisation::Grid && scattered == ScatteredModel::PerLabel)
+        throw ConfigError("fit: the scattered light per label needs per-label parameters (with a grid: scattered none or reestimated)");
     if (!labels.empty() && parametrisation == FitParametrisation::Grid) throw ConfigError("fit: labels choose parameters of a per-label fit, not of a grid");
     if (start)
         for (double v : *start)
@@ -378,6 +385,49 @@ std::vector<double> scatteredLight(const Scene& scene, const Microscope& m, cons
             for (size_t i = 0; i < planePixels; ++i)
                 out[(slot * m.stack.planes + static_cast<size_t>(k)) * planePixels + i] =
                     image.electrons[i] - (image.computedImage.empty() ? 0.0 : image.computedImage[i]);
+        }
+    }
+    return out;
+}
+
+// The scattered light split by label: one render of the scene as it is (the template), its paths'
+// re-emissions tallied per parameter's label. `rest` holds what no parameter scales (elastic light, fixed
+// labels); perKey[j] label j's share at θ_j = 1.
+struct LabelledScatter {
+    std::vector<double> rest;
+    std::vector<std::vector<double>> perKey;
+};
+LabelledScatter scatteredByLabel(const Scene& scene, const Microscope& m, const std::vector<size_t>& channels, const FitOptions& o, size_t stackPixels,
+                                 const ParameterMap& map) {
+    std::vector<LabelKey> keys;
+    for (const FitParameter& p : map.parameters()) keys.push_back(p.label);
+    const VoxelLabels labels(scene, keys);
+    LabelledScatter out;
+    out.rest.assign(stackPixels, 0.0);
+    out.perKey.assign(keys.size(), std::vector<double>(stackPixels, 0.0));
+    AcquireOptions a = o.acquisition;
+    a.estimator = Estimator::Split;
+    a.spp = o.scatteredSpp;
+    a.noiseRatio.reset();
+    a.progress = nullptr;
+    a.cancel = o.cancel;
+    a.labels = &labels;
+    a.labelCount = static_cast<int>(keys.size());
+    const size_t planePixels = static_cast<size_t>(m.width) * m.height;
+    for (size_t slot = 0; slot < channels.size(); ++slot) {
+        const ChannelImaging imaging = setUpChannelImaging(scene, m, channels[slot], a);
+        for (int k = 0; k < m.stack.planes; ++k) {
+            const PlaneImage image = acquirePlane(scene, m, channels[slot], k, a, &imaging);
+            if (!image.complete) throw Cancelled("fit cancelled while rendering the scattered light");
+            const size_t base = (slot * m.stack.planes + static_cast<size_t>(k)) * planePixels;
+            for (size_t i = 0; i < planePixels; ++i) {
+                double rest = image.electrons[i] - (image.computedImage.empty() ? 0.0 : image.computedImage[i]);
+                for (size_t j = 0; j < keys.size(); ++j) {
+                    out.perKey[j][base + i] = image.labelledElectrons[j][i];
+                    rest -= image.labelledElectrons[j][i];
+                }
+                out.rest[base + i] = rest;
+            }
         }
     }
     return out;
@@ -771,6 +821,29 @@ FitResult fitConcentrations(Scene& scene, const Microscope& m, const FitData& da
     const LatticeGeometry& frame = op.model(0).geometry();
     std::vector<double> scattered(op.stackPixels(), 0.0);
     std::vector<double> previous;
+    // Per label: the template's scattered light, once; each label's share joins its column.
+    LabelledScatter labelled;
+    if (o.scattered == ScatteredModel::PerLabel) {
+        if (map->isGrid()) throw ConfigError("fit: the scattered light per label needs per-label parameters; use --scattered reestimated or none with a grid");
+        labelled = scatteredByLabel(scene, m, data.channels, o, op.stackPixels(), *map);
+        scattered = labelled.rest;
+    }
+    auto withScatter = [&](SparseColumns cols) {
+        if (labelled.perKey.empty()) return cols;
+        for (size_t j = 0; j < cols.pixels.size(); ++j) {
+            std::vector<double> dense(op.stackPixels(), 0.0);
+            for (size_t k = 0; k < cols.pixels[j].size(); ++k) dense[cols.pixels[j][k]] = cols.values[j][k];
+            for (size_t i = 0; i < dense.size(); ++i) dense[i] += labelled.perKey[j][i];
+            cols.pixels[j].clear();
+            cols.values[j].clear();
+            for (size_t i = 0; i < dense.size(); ++i)
+                if (dense[i] != 0) {
+                    cols.pixels[j].push_back(static_cast<uint32_t>(i));
+                    cols.values[j].push_back(dense[i]);
+                }
+        }
+        return cols;
+    };
     const double alpha = map->isGrid() ? o.priorWeight.value_or(-1.0) : 0.0;
     LinearPoissonFit::Solution solution;
     std::unique_ptr<LinearPoissonFit> linear;
@@ -780,7 +853,7 @@ FitResult fitConcentrations(Scene& scene, const Microscope& m, const FitData& da
         scene.media = scaledMedia(guard.media, *map, theta, frame);
         if (!op.refreshGains(scene, o.cancel)) throw Cancelled("fit cancelled");
         if (o.scattered == ScatteredModel::Reestimated) scattered = scatteredLight(scene, m, data.channels, o, op.stackPixels());
-        const SparseColumns cols = op.columns(*map, o.cancel);
+        const SparseColumns cols = withScatter(op.columns(*map, o.cancel));
         const std::vector<double> fixed = op.apply(*map, std::vector<double>(map->size(), 0.0), true);
         std::vector<double> background(op.stackPixels());
         for (size_t i = 0; i < background.size(); ++i) background[i] = noise.darkElectrons + fixed[i] + scattered[i];
@@ -822,6 +895,7 @@ FitResult fitConcentrations(Scene& scene, const Microscope& m, const FitData& da
     result.normalisedResidual.assign(op.stackPixels(), 0.0);
     for (size_t i = 0; i < result.model.size(); ++i) {
         result.model[i] = mu0[i] + noise.darkElectrons + scattered[i];
+        for (size_t j = 0; j < labelled.perKey.size(); ++j) result.model[i] += theta[j] * labelled.perKey[j][i];
         const double e = data.adu ? noise.electrons(data.values[i]) : data.values[i];
         result.residual[i] = e - result.model[i];
         const bool saturated = data.adu && noise.saturated(data.values[i], o.saturationSigmas);

@@ -28,9 +28,12 @@ enum class FitParametrisation { Labels, Grid };
 // Deviance: maximum likelihood (the signed-root deviance as residual). Pearson: live Pearson weights,
 // (x − λ)/√λ, which are biased; only for comparisons.
 enum class FitLikelihood { Deviance, Pearson };
-// How the scattered light (the Monte Carlo part of an acquisition) enters the model: not at all, or
-// rendered at the current estimate before each outer iteration and held fixed within it.
-enum class ScatteredModel { None, Reestimated };
+// How the scattered light (the Monte Carlo part of an acquisition) enters the model: not at all;
+// rendered at the current estimate before each outer iteration and held fixed within it; or tallied per
+// label in one render of the template, each label's share scaling with its parameter (the default: it
+// stays linear where the scattered light dominates, where a background held fixed drives the outer
+// iterations apart, docs/inverse.md).
+enum class ScatteredModel { None, Reestimated, PerLabel };
 
 struct FitOptions {
     FitParametrisation parametrisation = FitParametrisation::Labels;
@@ -39,7 +42,7 @@ struct FitOptions {
     std::vector<int> labels;          // per label: fit only these label values (empty: every label); the rest stay fixed
     std::vector<std::string> channels;  // the microscope's channels to fit (empty: every channel of the stack)
     FitLikelihood likelihood = FitLikelihood::Deviance;
-    ScatteredModel scattered = ScatteredModel::None;
+    ScatteredModel scattered = ScatteredModel::PerLabel;
     int scatteredSpp = 16;            // paths per pixel of the scattered light's render
     int outerIterations = 3;          // at most
     double outerTolerance = 1e-6;     // relative change of every parameter that ends the outer loop
@@ -60,7 +63,8 @@ const char* fitParametrisationName(FitParametrisation p);
 const char* scatteredModelName(ScatteredModel s);
 const char* fitLikelihoodName(FitLikelihood l);
 // What a user types, into the options; ConfigError naming `option` and the text.
-//  "labels" or "grid:8um" (a length with its unit);  "none" or "reestimated";  "deviance" or "pearson".
+//  "labels" or "grid:8um" (a length with its unit);  "auto" (labels per label, reestimated with a grid), "none",
+//  "reestimated" or "labels" (set the parametrisation first);  "deviance" or "pearson".
 void setParametrisation(FitOptions& o, const std::string& text, const std::string& option);
 void setScatteredModel(FitOptions& o, const std::string& text, const std::string& option);
 void setLikelihood(FitOptions& o, const std::string& text, const std::string& option);

@@ -435,7 +435,7 @@ PYBIND11_MODULE(fluorosim, mod) {
     mod.def("fit", &fitStack, py::arg("scene"), py::arg("stack"), py::kw_only(), py::arg("planes") = py::none(), py::arg("step") = py::none(),
             py::arg("stack_channels") = py::none(),
             py::arg("pixel_size_um") = py::none(), py::arg("z_step_um") = py::none(), py::arg("camera") = py::none(), py::arg("values") = "adu",
-            py::arg("params") = "labels", py::arg("channels") = std::vector<std::string>{}, py::arg("scattered") = "none",
+            py::arg("params") = "labels", py::arg("channels") = std::vector<std::string>{}, py::arg("scattered") = "auto",
             py::arg("scattered_spp") = 16, py::arg("likelihood") = "deviance", py::arg("outer") = 3, py::arg("iterations") = 100,
             py::arg("prior_weight") = py::none(), py::arg("labels") = std::vector<int>{}, py::arg("unlabelled") = false,
             py::arg("start") = py::none(), py::arg("threads") = 0, py::arg("seed") = py::none(), py::arg("base") = py::none(),

@@ -28,7 +28,7 @@ extern "C" void onFitSignal(int) { gCancel.store(true); }
 struct FitArgs {
     std::optional<int> planes;
     std::optional<std::string> step;
-    std::string scene, stack, output, params = "labels", scattered = "none", likelihood = "deviance";
+    std::string scene, stack, output, params = "labels", scattered = "auto", likelihood = "deviance";
     std::vector<std::string> channels;
     std::vector<int> labels;
     int scatteredSpp = 16, outer = 3, iterations = 100, threads = 0;
@@ -243,7 +243,7 @@ void addFitCommands(CLI::App& app) {
     fit->add_option("--step", a->step, "Plane step, as given to acquire, e.g. 1um (default: the scene's)");
     fit->add_option("--params", a->params, "labels (one scale per label) or grid:CELL (e.g. grid:8um)");
     fit->add_option("--channels", a->channels, "Channels to fit (default: every channel of the stack)")->delimiter(',');
-    fit->add_option("--scattered", a->scattered, "Scattered light in the model: none, or reestimated (a Monte Carlo render per outer iteration)");
+    fit->add_option("--scattered", a->scattered, "Scattered light in the model: labels (one render tallied per label; the default per label), reestimated (a render per outer iteration, held fixed; the default with a grid), none");
     fit->add_option("--scattered-spp", a->scatteredSpp, "Paths per pixel of the scattered light's render");
     fit->add_option("--likelihood", a->likelihood, "deviance (maximum likelihood) or pearson (biased; for comparison)");
     fit->add_option("--outer", a->outer, "Outer iterations at most (attenuation and scattered light refreshed between)");

@@ -212,6 +212,8 @@ struct PathTracer::PathState {
     SampledSpectrum firstSegmentTotal;
     std::array<SampledSpectrum, kImageLevels> firstSegmentPooled{};
     double tMin = 0;                // > 0 when ray.o lies on the surface the ray leaves
+    const EmissionLabels* labels = nullptr;  // camera paths only: split re-emissions by label
+    std::vector<std::pair<uint32_t, SampledSpectrum>> labelled;
 };
 
 PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats,
@@ -223,6 +225,7 @@ PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths&
     state.beta = start.beta;
     state.r_u = start.r_u;
     state.imaging = start.imaging;
+    state.labels = start.labels;
     state.firstSegment = true;
     state.prevScatter = ray.o;
     return trace(state, wl, rng, stats);
@@ -249,7 +252,9 @@ PathRadiance PathTracer::traceFromEmission(const Vec3& p, int medium, const Samp
 
 SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double* channels, const SampledWavelengths& wl,
                                          const SampledSpectrum& weight, Rng& rng, PathStats& stats, int generation, int depth,
-                                         StartBeamWeight startBeam) const {
+                                         StartBeamWeight startBeam, const LabelledChannels* parts, int partCount,
+                                         SampledSpectrum* partResults) const {
+    for (int i = 0; i < partCount; ++i) partResults[i] = SampledSpectrum(0.0);
     // Generations are ended by roulette; this cap only guards the stack and is reported if reached.
     constexpr int kMaxGenerations = 64;
     if (generation >= kMaxGenerations) {
@@ -298,6 +303,16 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double
         if (Lx[k] == 0) continue;
         for (int j = 0; j < kNumWavelengths; ++j) result[j] += A[j][k] / (start[k] * survival) * Lx[k];
     }
+    // Each label's share: the same sub-path, through the kernel of its part of the dye (linear in it).
+    for (int i = 0; i < partCount; ++i)
+        for (int k = 0; k < kNumWavelengths; ++k) {
+            if (Lx[k] == 0 || wlx.pdf[k] == 0) continue;
+            for (int j = 0; j < kNumWavelengths; ++j) {
+                if (weight[j] == 0) continue;
+                const double a = weight[j] * fluorescence_.kernel(medium, parts[i].channels.data(), wlx.lambda[k], wl.lambda[j]) / (wlx.pdf[k] * kNumWavelengths);
+                partResults[i][j] += a / (start[k] * survival) * Lx[k];
+            }
+        }
     return result;
 }
 
@@ -305,7 +320,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
     SampledSpectrum L(0.0), Lf(0.0);
     // Everything after the first vertex is imaged at its level; first-segment branches at their own.
     auto finish = [&] {
-        PathRadiance r{L, Lf, st.firstSegmentPooled};
+        PathRadiance r{L, Lf, st.firstSegmentPooled, std::move(st.labelled)};
         if (st.imaging && st.level > 0) r.pooled[static_cast<size_t>(st.level)] += L + Lf - st.firstSegmentTotal;
         return r;
     };
@@ -495,20 +510,30 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         const double select = 1.0 / (static_cast<double>(count) * profile.sides());
         SampledSpectrum source(0.0);
         if (!st.imaging->computesUnscatteredAt(point->p)) return source;
+        std::array<LabelledChannels, kMaxLabelsAtPoint> parts;
+        std::array<SampledSpectrum, kMaxLabelsAtPoint> partSources{};
+        const int partCount = st.labels ? st.labels->split(pointMedium, point->p, ch.data(), parts) : 0;
         for (const SpectralLine& l : profile.spectrum().spectralLines()) {
             if (!(l.power > 0) || !profile.inCore(point->p, side, l.lambdaNm)) continue;
             const double E = profile.irradiance(point->p, side, l.lambdaNm) * 1e6 * l.power;
             if (!(E > 0)) continue;
             const double Tb = beamTransmittance(point->p, -profile.direction(side), pointMedium, SampledWavelengths::atLine(l.lambdaNm, 1.0), rng)[0];
             if (!(Tb > 0)) continue;
-            for (int j = 0; j < kNumWavelengths; ++j)
+            for (int j = 0; j < kNumWavelengths; ++j) {
                 source[j] += fluorescence_.kernel(pointMedium, ch.data(), l.lambdaNm, wl.lambda[j]) * kInv4Pi * E * Tb / select;
+                for (int i = 0; i < partCount; ++i)
+                    partSources[static_cast<size_t>(i)][j] +=
+                        fluorescence_.kernel(pointMedium, parts[static_cast<size_t>(i)].channels.data(), l.lambdaNm, wl.lambda[j]) * kInv4Pi * E * Tb / select;
+            }
         }
         if (!source) return source;
         const SampledSpectrum T = transmittance(p, point->p, medium, wl, rng);
         if (!T) return SampledSpectrum(0.0);
         const double mis = emissionMis(distance);
-        return beta * T * source * (f * mis / (distance * distance * point->pdf)) / r_u.average();
+        const SampledSpectrum factor = beta * T * (f * mis / (distance * distance * point->pdf)) / r_u.average();
+        for (int i = 0; i < partCount; ++i)
+            if (partSources[static_cast<size_t>(i)]) st.labelled.push_back({parts[static_cast<size_t>(i)].key, factor * partSources[static_cast<size_t>(i)]});
+        return factor * source;
     };
 
     auto scatterInMedium = [&](const Vec3& p, const HenyeyGreenstein& phase, double proposalG, StartBeamWeight startBeam) {
@@ -616,8 +641,14 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                                     const double mis = st.imaging->emissionPointPdf(y) > 0 ? 1 - emissionMis(length(y - prevScatter)) : 1.0;
                                     startBeam = {st.imaging, mis};
                                 }
-                                const SampledSpectrum branch = fluorescence(y, medium, ch.data(), wl, w, rng, stats, st.generation, depth, startBeam);
+                                std::array<LabelledChannels, kMaxLabelsAtPoint> parts;
+                                std::array<SampledSpectrum, kMaxLabelsAtPoint> partResults;
+                                const int partCount = st.labels ? st.labels->split(medium, y, ch.data(), parts) : 0;
+                                const SampledSpectrum branch = fluorescence(y, medium, ch.data(), wl, w, rng, stats, st.generation, depth, startBeam,
+                                                                            parts.data(), partCount, partResults.data());
                                 Lf += branch;
+                                for (int i = 0; i < partCount; ++i)
+                                    if (partResults[static_cast<size_t>(i)]) st.labelled.push_back({parts[static_cast<size_t>(i)].key, partResults[static_cast<size_t>(i)]});
                                 if (st.firstSegment && st.imaging) {
                                     st.firstSegmentTotal += branch;
                                     if (const int k = st.imaging->imageLevel(y); k > 0) st.firstSegmentPooled[static_cast<size_t>(k)] += branch;

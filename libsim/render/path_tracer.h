@@ -48,7 +48,26 @@ struct PathRadiance {
     // Of the total, what a camera's imaging pools over blocks of 2^k × 2^k pixels, by k >= 1
     // (CameraPathImaging::imageLevel); the rest is imaged per pixel.
     std::array<SampledSpectrum, kImageLevels> pooled{};
+    // With PathStart::labels: the camera path's re-emissions by the label that emitted them (key, radiance);
+    // part of `fluorescent`.
+    std::vector<std::pair<uint32_t, SampledSpectrum>> labelled;
     SampledSpectrum total() const { return elastic + fluorescent; }
+};
+
+// Fluorescence split by what emitted it: the labelled objects (neurons) whose dye re-emits at a point,
+// for fits whose parameters are labels. A camera path's re-emission at p is linear in the dye there, so
+// each label's share follows from the fluorescence kernel of that label's part of the dye channels.
+struct LabelledChannels {
+    uint32_t key = 0;
+    ChannelValues channels{};  // the label's part of the medium's channels at p (dye channels only)
+};
+inline constexpr int kMaxLabelsAtPoint = 8;
+class EmissionLabels {
+public:
+    virtual ~EmissionLabels() = default;
+    // The parts of the dye at p (in `medium`, whose channels there are `channels`) by label: the count
+    // written to out. What no part holds is left unattributed.
+    virtual int split(int medium, const Vec3& p, const double* channels, std::array<LabelledChannels, kMaxLabelsAtPoint>& out) const = 0;
 };
 
 // What a caller that images camera paths (the microscope) puts around one path: a weight at the path's
@@ -86,6 +105,7 @@ public:
 struct PathStart {
     SampledSpectrum beta{1.0}, r_u{1.0};
     const CameraPathImaging* imaging = nullptr;  // none: a plain camera path
+    const EmissionLabels* labels = nullptr;      // split the camera path's re-emissions by label (PathRadiance::labelled)
 };
 
 // How a sub-path started at a branch point weighs its first vertex's connection to a beam's unscattered
@@ -144,9 +164,11 @@ private:
                                    int generation, Rng& rng, PathStats& stats, StartBeamWeight startBeam = {}) const;
     // Radiance re-emitted at p towards the path, at the camera wavelengths, for a branch whose
     // source-term estimate is multiplied by `weight` (throughput over branch pdf, MIS-normalized).
+    // With `parts`, also each part's share of the result (partResults[i] for parts[i]).
     SampledSpectrum fluorescence(const Vec3& p, int medium, const double* channels, const SampledWavelengths& wl,
                                  const SampledSpectrum& weight, Rng& rng, PathStats& stats, int generation, int depth,
-                                 StartBeamWeight startBeam) const;
+                                 StartBeamWeight startBeam, const LabelledChannels* parts = nullptr, int partCount = 0,
+                                 SampledSpectrum* partResults = nullptr) const;
     int mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const Vec3& dir, int current) const;
 
     const Scene& scene_;
