@@ -5,6 +5,7 @@
 #include <mutex>
 
 #include "core/errors.h"
+#include "core/memory_cap.h"
 #include "core/parallel.h"
 #include "core/rng.h"
 #include "render/fluorescence.h"
@@ -162,6 +163,36 @@ void addPooledParts(const Rows& rows, int width, int height, PlaneImage& r, SumO
     for (size_t i = 0; i < variance.size(); ++i) r.stderrElectrons[i] = std::sqrt(variance[i]);
 }
 
+// An image of per-pixel means pooled over blocks of 2^k pixels: the block means interpolated bilinearly
+// between block centres (addPooledParts' rule, for one image).
+std::vector<double> poolImage(const std::vector<double>& image, int width, int height, int k) {
+    const int block = 1 << k, bx = ((width - 1) >> k) + 1, by = ((height - 1) >> k) + 1;
+    std::vector<double> mean(static_cast<size_t>(bx) * by, 0.0);
+    for (int y = 0; y < height; ++y)
+        for (int x = 0; x < width; ++x) mean[static_cast<size_t>((y >> k) * bx + (x >> k))] += image[static_cast<size_t>(y) * width + x];
+    for (int cy = 0; cy < by; ++cy)
+        for (int cx = 0; cx < bx; ++cx)
+            mean[static_cast<size_t>(cy * bx + cx)] /= double(std::min(block, width - cx * block)) * std::min(block, height - cy * block);
+    auto axis = [&](int p, int blocks, int* c0, int* c1, double* f) {
+        const double u = (p + 0.5) / block - 0.5;
+        *c0 = std::clamp(static_cast<int>(std::floor(u)), 0, blocks - 1);
+        *c1 = std::min(*c0 + 1, blocks - 1);
+        *f = std::clamp(u - *c0, 0.0, 1.0);
+    };
+    std::vector<double> out(image.size(), 0.0);
+    for (int y = 0; y < height; ++y) {
+        int y0, y1, x0, x1;
+        double fy, fx;
+        axis(y, by, &y0, &y1, &fy);
+        for (int x = 0; x < width; ++x) {
+            axis(x, bx, &x0, &x1, &fx);
+            out[static_cast<size_t>(y) * width + x] = (1 - fx) * (1 - fy) * mean[static_cast<size_t>(y0 * bx + x0)] + fx * (1 - fy) * mean[static_cast<size_t>(y0 * bx + x1)] +
+                                                      (1 - fx) * fy * mean[static_cast<size_t>(y1 * bx + x0)] + fx * fy * mean[static_cast<size_t>(y1 * bx + x1)];
+        }
+    }
+    return out;
+}
+
 PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const ObjectiveOptions& objective, const FocalPlane& focus,
                       const Filter& emission, const DetectorOptions& detector, int width, int height, uint64_t streamKey,
                       const AcquireOptions& o, const ChannelImaging& channel) {
@@ -203,7 +234,13 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         std::array<std::vector<double>, kImageLevels> pooledSum, pooledVariance;
     };
     std::vector<RowTotals> rows(static_cast<size_t>(height));
-    if (o.labels) r.labelledElectrons.assign(static_cast<size_t>(o.labelCount), std::vector<double>(r.electrons.size(), 0.0));
+    // Per label and image level, the mean of each pixel's samples.
+    std::vector<std::array<std::vector<double>, kImageLevels>> labelledLevels(o.labels ? static_cast<size_t>(o.labelCount) : 0);
+    if (o.labels) {
+        requireMemory(8.0 * kImageLevels * static_cast<double>(o.labelCount) * static_cast<double>(r.electrons.size()), "the scattered light's tally per label");
+        for (auto& levels : labelledLevels)
+            for (auto& image : levels) image.assign(r.electrons.size(), 0.0);
+    }
     std::vector<double> largestInPixel(r.electrons.size(), 0.0);  // largest per-pixel path sample
     // Dark electrons of the exposure: part of the camera noise an adaptive target is relative to.
     const double darkElectrons = detector.darkCurrentElectronsPerS * detector.exposureS;
@@ -222,7 +259,7 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
             struct Sample {
                 double total = 0;
                 std::array<double, kImageLevels> pooled{};
-                std::vector<std::pair<uint32_t, double>> labelled;
+                std::vector<std::pair<uint32_t, double>> labelled;  // (key × kImageLevels + level, electrons)
             };
             auto pathSample = [&](uint64_t s) {
                 Rng rng = Rng::forKey(o.seed, streamKey + pixel, s);
@@ -239,7 +276,7 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                     for (int j = 1; j < kNumWavelengths; ++j) pathStart.r_u[j] = psf.displacementDensity(radius, wl.lambda[j]) / hero;
                     pathStart.beta = pathStart.r_u;
                 }
-                const PathImaging pathImaging(imaging, model, emissionPoints.get(), point, o.labels ? 0.0 : o.poolingFraction);
+                const PathImaging pathImaging(imaging, model, emissionPoints.get(), point, o.poolingFraction);
                 pathStart.imaging = &pathImaging;
                 pathStart.labels = o.labels;
                 double cosT = 0;
@@ -255,7 +292,8 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                 out.total = electrons(radiance.total());
                 for (int k = 1; k < kImageLevels; ++k)
                     if (radiance.pooled[static_cast<size_t>(k)]) out.pooled[static_cast<size_t>(k)] = electrons(radiance.pooled[static_cast<size_t>(k)]);
-                for (const auto& [key, L] : radiance.labelled) out.labelled.push_back({key, electrons(L)});
+                for (const PathRadiance::Labelled& l : radiance.labelled)
+                    out.labelled.push_back({l.key * kImageLevels + static_cast<uint32_t>(std::clamp(l.level, 0, kImageLevels - 1)), electrons(l.radiance)});
                 bool finite = std::isfinite(out.total);
                 for (double e : out.pooled) finite = finite && std::isfinite(e);
                 for (const auto& l : out.labelled) finite = finite && std::isfinite(l.second);
@@ -280,8 +318,11 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
             std::array<PixelTally, kImageLevels> pooled;
             for (int s = 0; s < n; ++s) {
                 const Sample e = pathSample(static_cast<uint64_t>(s));
-                for (const auto& [key, v] : e.labelled)
-                    if (key < r.labelledElectrons.size()) r.labelledElectrons[key][pixel] += v / n;
+                for (const auto& [slot, v] : e.labelled) {
+                    const size_t key = slot / kImageLevels, level = slot % kImageLevels;
+                    if (key >= labelledLevels.size()) continue;
+                    labelledLevels[key][level][pixel] += v / n;
+                }
                 double own = e.total;  // the part imaged per pixel
                 for (int k = 1; k < kImageLevels; ++k) {
                     own -= e.pooled[static_cast<size_t>(k)];
@@ -320,6 +361,17 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
     });
     addPooledParts(rows, width, height, r, [](const RowTotals& row, int k) -> const std::vector<double>& { return row.pooledSum[static_cast<size_t>(k)]; },
                    [](const RowTotals& row, int k) -> const std::vector<double>& { return row.pooledVariance[static_cast<size_t>(k)]; });
+    // Each label's share, pooled as the total is: per level, the block means of its pixels' means,
+    // interpolated bilinearly between block centres.
+    for (auto& levels : labelledLevels) {
+        std::vector<double> image = levels[0];
+        for (int k = 1; k < kImageLevels; ++k)
+            if (std::any_of(levels[static_cast<size_t>(k)].begin(), levels[static_cast<size_t>(k)].end(), [](double v) { return v != 0; })) {
+                const std::vector<double> pooled = poolImage(levels[static_cast<size_t>(k)], width, height, k);
+                for (size_t i = 0; i < image.size(); ++i) image[i] += pooled[i];
+            }
+        r.labelledElectrons.push_back(std::move(image));
+    }
     // Heavy tails: a pixel's largest path sample against its value, where the value is above the read
     // noise² (below it a ratio says nothing about the camera).
     for (size_t i = 0; i < r.electrons.size(); ++i)

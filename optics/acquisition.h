@@ -52,8 +52,8 @@ struct AcquireOptions {
     int maxSpp = 4096;
     int pilotSpp = 16;
     uint64_t seed = 1;
-    // Tally the paths' re-emissions by label (PlaneImage::labelledElectrons, `labelCount` keys): for fits
-    // of the scattered light. Pooling is off while labels are tallied (every sample stays in its pixel).
+    // Tally the paths' re-emissions by label (PlaneImage::labelledElectrons, `labelCount` keys), pooled as
+    // the total is: for fits of the scattered light.
     const EmissionLabels* labels = nullptr;
     int labelCount = 0;
     int threads = 0;  // 0: all cores

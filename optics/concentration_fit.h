@@ -43,7 +43,7 @@ struct FitOptions {
     std::vector<std::string> channels;  // the microscope's channels to fit (empty: every channel of the stack)
     FitLikelihood likelihood = FitLikelihood::Deviance;
     ScatteredModel scattered = ScatteredModel::PerLabel;
-    int scatteredSpp = 16;            // paths per pixel of the scattered light's render
+    int scatteredSpp = 64;            // paths per pixel of the scattered light's render
     int outerIterations = 3;          // at most
     double outerTolerance = 1e-6;     // relative change of every parameter that ends the outer loop
     int maxIterations = 100;          // trust-region iterations per outer iteration

@@ -436,7 +436,7 @@ PYBIND11_MODULE(fluorosim, mod) {
             py::arg("stack_channels") = py::none(),
             py::arg("pixel_size_um") = py::none(), py::arg("z_step_um") = py::none(), py::arg("camera") = py::none(), py::arg("values") = "adu",
             py::arg("params") = "labels", py::arg("channels") = std::vector<std::string>{}, py::arg("scattered") = "auto",
-            py::arg("scattered_spp") = 16, py::arg("likelihood") = "deviance", py::arg("outer") = 3, py::arg("iterations") = 100,
+            py::arg("scattered_spp") = 64, py::arg("likelihood") = "deviance", py::arg("outer") = 3, py::arg("iterations") = 100,
             py::arg("prior_weight") = py::none(), py::arg("labels") = std::vector<int>{}, py::arg("unlabelled") = false,
             py::arg("start") = py::none(), py::arg("threads") = 0, py::arg("seed") = py::none(), py::arg("base") = py::none(),
             "Fit dye concentrations to an observed stack, as `fluorosim fit` (planes and step as given to acquire). `stack`: an OME-TIFF path, or an array (C, Z, Y, X) of "

@@ -31,7 +31,7 @@ struct FitArgs {
     std::string scene, stack, output, params = "labels", scattered = "auto", likelihood = "deviance";
     std::vector<std::string> channels;
     std::vector<int> labels;
-    int scatteredSpp = 16, outer = 3, iterations = 100, threads = 0;
+    int scatteredSpp = 64, outer = 3, iterations = 100, threads = 0;
     std::optional<int64_t> seed;
     std::optional<double> priorWeight;
     bool unlabelled = false;

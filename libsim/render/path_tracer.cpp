@@ -213,7 +213,7 @@ struct PathTracer::PathState {
     std::array<SampledSpectrum, kImageLevels> firstSegmentPooled{};
     double tMin = 0;                // > 0 when ray.o lies on the surface the ray leaves
     const EmissionLabels* labels = nullptr;  // camera paths only: split re-emissions by label
-    std::vector<std::pair<uint32_t, SampledSpectrum>> labelled;
+    std::vector<PathRadiance::Labelled> labelled;
 };
 
 PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats,
@@ -532,7 +532,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         const double mis = emissionMis(distance);
         const SampledSpectrum factor = beta * T * (f * mis / (distance * distance * point->pdf)) / r_u.average();
         for (int i = 0; i < partCount; ++i)
-            if (partSources[static_cast<size_t>(i)]) st.labelled.push_back({parts[static_cast<size_t>(i)].key, factor * partSources[static_cast<size_t>(i)]});
+            if (partSources[static_cast<size_t>(i)]) st.labelled.push_back({parts[static_cast<size_t>(i)].key, st.level, factor * partSources[static_cast<size_t>(i)]});
         return factor * source;
     };
 
@@ -647,8 +647,11 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                                 const SampledSpectrum branch = fluorescence(y, medium, ch.data(), wl, w, rng, stats, st.generation, depth, startBeam,
                                                                             parts.data(), partCount, partResults.data());
                                 Lf += branch;
+                                // On the first segment a branch is imaged at its own level; later, at the first vertex's.
+                                const int level = st.firstSegment && st.imaging ? st.imaging->imageLevel(y) : st.level;
                                 for (int i = 0; i < partCount; ++i)
-                                    if (partResults[static_cast<size_t>(i)]) st.labelled.push_back({parts[static_cast<size_t>(i)].key, partResults[static_cast<size_t>(i)]});
+                                    if (partResults[static_cast<size_t>(i)])
+                                        st.labelled.push_back({parts[static_cast<size_t>(i)].key, level, partResults[static_cast<size_t>(i)]});
                                 if (st.firstSegment && st.imaging) {
                                     st.firstSegmentTotal += branch;
                                     if (const int k = st.imaging->imageLevel(y); k > 0) st.firstSegmentPooled[static_cast<size_t>(k)] += branch;

@@ -48,9 +48,14 @@ struct PathRadiance {
     // Of the total, what a camera's imaging pools over blocks of 2^k × 2^k pixels, by k >= 1
     // (CameraPathImaging::imageLevel); the rest is imaged per pixel.
     std::array<SampledSpectrum, kImageLevels> pooled{};
-    // With PathStart::labels: the camera path's re-emissions by the label that emitted them (key, radiance);
-    // part of `fluorescent`.
-    std::vector<std::pair<uint32_t, SampledSpectrum>> labelled;
+    // With PathStart::labels: the camera path's re-emissions by the label that emitted them, part of
+    // `fluorescent`, each with the image level it is pooled at (0: per pixel), as `pooled` splits the total.
+    struct Labelled {
+        uint32_t key;
+        int level;
+        SampledSpectrum radiance;
+    };
+    std::vector<Labelled> labelled;
     SampledSpectrum total() const { return elastic + fluorescent; }
 };
 
