@@ -924,7 +924,9 @@ FitResult fitConcentrations(Scene& scene, const Microscope& m, const FitData& da
     return result;
 }
 
-Gradient fitGradient(const Scene& scene, const Microscope& m, const FitOptions& o) {
+Gradient fitGradient(const Scene& scene, const Microscope& m, const FitOptions& options) {
+    FitOptions o = options;
+    o.scattered = ScatteredModel::None;  // the columns are the computed image's
     o.validate();
     Gradient g;
     g.channels = fitChannels(m, o);

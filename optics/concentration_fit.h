@@ -161,7 +161,8 @@ private:
 double checkFitDerivatives(const LinearPoissonFit& fit, const std::vector<double>& observation, bool adu, const std::vector<double>& theta);
 
 // The model's Jacobian columns for users who drive their own optimiser: ∂(expected photoelectrons)/∂θ_j
-// per stack pixel, at the scene's concentrations (θ = 1), for `options.channels`.
+// per stack pixel of the computed image (the scattered light is not in them), at the scene's
+// concentrations (θ = 1), for `options.channels`.
 struct Gradient {
     std::vector<FitParameter> parameters;
     std::vector<size_t> channels;
