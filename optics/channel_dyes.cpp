@@ -38,7 +38,8 @@ const EmittingDye* ChannelDyes::dyeOf(int medium, int slot) const {
 }
 
 ChannelDyes channelDyes(const Scene& scene, const std::vector<BeamLine>& lines, const FluorescencePlan& plan,
-                        const std::function<double(double)>& detection, int spectralNodes) {
+                        const std::function<double(double)>& detection, int spectralNodes, const std::vector<double>& lineIrradiance,
+                        double dropBelow) {
     ChannelDyes c;
     for (const BeamLine& l : lines) c.lineLambda.push_back(l.lambdaNm);
     c.firstOfMedium.assign(scene.media.size(), -1);
@@ -83,6 +84,40 @@ ChannelDyes channelDyes(const Scene& scene, const std::vector<BeamLine>& lines, 
             c.dyes.push_back(std::move(t));
         }
         c.slots = std::max(c.slots, slot);
+    }
+    // Dyes far less efficient than the channel's best, per mol/L: Φ D Σ_l σa(λ_l; 1 M) λ_l E_l.
+    if (!lineIrradiance.empty() && dropBelow > 0 && !c.dyes.empty()) {
+        std::vector<double> efficiency;
+        double best = 0;
+        for (const EmittingDye& t : c.dyes) {
+            double e = 0;
+            for (size_t l = 0; l < t.absorptionPerMolar.size() && l < lineIrradiance.size(); ++l)
+                e += t.absorptionPerMolar[l] * c.lineLambda[l] * lineIrradiance[l];
+            efficiency.push_back(e * t.quantumYield * t.detected);
+            best = std::max(best, efficiency.back());
+        }
+        ChannelDyes kept;
+        kept.lineLambda = c.lineLambda;
+        kept.firstOfMedium.assign(scene.media.size(), -1);
+        std::vector<std::vector<double>> keptDensity;
+        std::vector<int> slot(scene.media.size(), 0);
+        for (size_t i = 0; i < c.dyes.size(); ++i) {
+            EmittingDye t = c.dyes[i];
+            if (efficiency[i] < dropBelow * best) {
+                kept.dropped.push_back(scene.media[static_cast<size_t>(t.medium)].name() + ": " + t.name);
+                continue;
+            }
+            t.slot = slot[static_cast<size_t>(t.medium)]++;
+            if (kept.firstOfMedium[static_cast<size_t>(t.medium)] < 0) kept.firstOfMedium[static_cast<size_t>(t.medium)] = static_cast<int>(kept.dyes.size());
+            keptDensity.push_back(dyeDensity[i]);
+            kept.dyes.push_back(std::move(t));
+        }
+        for (int n : slot) kept.slots = std::max(kept.slots, n);
+        std::fill(channelDensity.begin(), channelDensity.end(), 0.0);
+        for (size_t i = 0; i < kept.dyes.size(); ++i)
+            for (int k = 0; k < cells; ++k) channelDensity[static_cast<size_t>(k)] += keptDensity[i][static_cast<size_t>(k)] / kept.dyes[i].detected;
+        c = std::move(kept);
+        dyeDensity = std::move(keptDensity);
     }
     if (c.dyes.empty()) return c;
     // The cone-mean transmittance is kept at the centroids of four equal-mass parts of the channel's

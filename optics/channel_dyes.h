@@ -33,16 +33,20 @@ struct ChannelDyes {
     std::vector<int> firstOfMedium;       // per medium: index of its first emitting dye, or -1
     int slots = 0;                        // the most emitting dyes of one medium
     double shortestDetectedNm = 0;        // with 1e-3 of the detected band below it (the pixel quadrature's band)
+    std::vector<std::string> dropped;     // dyes left out for their efficiency (medium: dye)
     bool empty() const { return dyes.empty(); }
     // The emitting dye of `medium` in `slot`, or nullptr.
     const EmittingDye* dyeOf(int medium, int slot) const;
 };
 
 // `detection(λ)`: photoelectrons per joule at λ (emission path × QE × λ/hc). Dyes that no line excites or
-// whose emission the channel does not detect are left out. `spectralNodes`: equal-mass parts of each
-// dye's detected emission for its PSF.
+// whose emission the channel does not detect are left out, and with `lineIrradiance` (per line, at the
+// field's centre) so are those whose photoelectrons per mol/L fall below `dropBelow` of the channel's
+// most efficient dye: the AF594 neuron in an AF488 channel (1e-7 of it) would otherwise be computed
+// point by point. `spectralNodes`: equal-mass parts of each dye's detected emission for its PSF.
 ChannelDyes channelDyes(const Scene& scene, const std::vector<BeamLine>& lines, const FluorescencePlan& plan,
-                        const std::function<double(double)>& detection, int spectralNodes);
+                        const std::function<double(double)>& detection, int spectralNodes, const std::vector<double>& lineIrradiance = {},
+                        double dropBelow = 0);
 
 // Splits the distribution `density` on [lo, lo + n·step) into `count` bins of equal mass; each bin's
 // centroid and mass (masses sum to 1). Empty bins are dropped.

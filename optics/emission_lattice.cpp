@@ -494,15 +494,23 @@ EmissionLattice::EmissionLattice(const Scene& scene, const ChannelDyes& dyes, co
     labels_ = allKeys;
     size_t count = 0;
     for (const auto& c : chunks) count += c.size();
-    std::vector<std::pair<size_t, size_t>> order;  // (chunk, index)
+    // Sorted on contiguous keys (not through the chunks, whose scattered reads dominated the sort).
+    struct Key {
+        double z, y, x, volume;
+        int32_t medium;
+        uint32_t chunk, index;
+    };
+    std::vector<Key> order;
     order.reserve(count);
     for (size_t c = 0; c < chunks.size(); ++c)
-        for (size_t i = 0; i < chunks[c].size(); ++i) order.push_back({c, i});
-    auto pointOf = [&](const std::pair<size_t, size_t>& o) -> const Candidate& { return chunks[o.first][o.second]; };
-    std::sort(order.begin(), order.end(), [&](const auto& a, const auto& b) {
-        const LatticePoint &p = pointOf(a).point, &q = pointOf(b).point;
-        return std::tie(p.z, p.y, p.x, p.medium, p.volumeMm3) < std::tie(q.z, q.y, q.x, q.medium, q.volumeMm3);
+        for (size_t i = 0; i < chunks[c].size(); ++i) {
+            const LatticePoint& q = chunks[c][i].point;
+            order.push_back({q.z, q.y, q.x, q.volumeMm3, q.medium, static_cast<uint32_t>(c), static_cast<uint32_t>(i)});
+        }
+    std::sort(order.begin(), order.end(), [](const Key& a, const Key& b) {
+        return std::tie(a.z, a.y, a.x, a.medium, a.volume) < std::tie(b.z, b.y, b.x, b.medium, b.volume);
     });
+    auto pointOf = [&](const Key& o) -> const Candidate& { return chunks[o.chunk][o.index]; };
     points_.reserve(count);
     concentrations_.reserve(count * static_cast<size_t>(slots_));
     exact_.reserve(count);
@@ -515,7 +523,7 @@ EmissionLattice::EmissionLattice(const Scene& scene, const ChannelDyes& dyes, co
         if (withLabels) {
             partStart_.push_back(static_cast<uint32_t>(parts_.size()));
             for (Part p : s.parts) {
-                const LabelKey k = chunkKeys[o.first][p.key];
+                const LabelKey k = chunkKeys[o.chunk][p.key];
                 p.key = static_cast<uint32_t>(std::lower_bound(labels_.begin(), labels_.end(), k) - labels_.begin());
                 parts_.push_back(p);
             }

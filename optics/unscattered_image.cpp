@@ -45,6 +45,7 @@ void UnscatteredOptions::validate() const {
     require(kernelPhases >= 2 && kernelPhases <= 64 && kernelPhases % (2 * lateralSamples) == 0,
             "unscattered image: kernelPhases must be a multiple of 2 x lateralSamples in [2, 64], got " + std::to_string(kernelPhases));
     require(farBinUm > 0 && std::isfinite(farBinUm), "unscattered image: farBinUm must be positive, got " + std::to_string(farBinUm));
+    require(dropDyesBelow >= 0 && dropDyesBelow < 1, "unscattered image: dropDyesBelow must lie in [0, 1), got " + std::to_string(dropDyesBelow));
     require(nearPixels >= 1 && nearPixels <= 64 && nearTaperPixels >= 1 && nearTaperPixels <= 64,
             "unscattered image: nearPixels and nearTaperPixels must lie in [1, 64], got " + std::to_string(nearPixels) + " and " +
                 std::to_string(nearTaperPixels));
@@ -60,16 +61,25 @@ EmissionPoints::EmissionPoints(const Imaging& plane, double x0, double yTop, dou
 uint64_t EmissionPoints::key(int64_t i, int64_t j, int64_t l) const { return packKey(i, j, l); }
 
 void EmissionPoints::add(int64_t i, int64_t j, int64_t layer, double power) {
-    if (power > 0) power_[key(i, j, layer)] += power;
+    if (power > 0) pending_.push_back({key(i, j, layer), power});
 }
 
 void EmissionPoints::finish() {
+    // Cells sorted by key, their powers summed; the cdf over them, each cell's power kept for pdf().
+    std::sort(pending_.begin(), pending_.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     cells_.clear();
-    for (const auto& [k, v] : power_) cells_.push_back(k);
-    std::sort(cells_.begin(), cells_.end());
+    power_.clear();
+    for (const auto& [k, v] : pending_) {
+        if (!cells_.empty() && cells_.back() == k) power_.back() += v;
+        else {
+            cells_.push_back(k);
+            power_.push_back(v);
+        }
+    }
+    pending_ = {};
     cdf_.resize(cells_.size());
     total_ = 0;
-    for (size_t n = 0; n < cells_.size(); ++n) cdf_[n] = total_ += power_.at(cells_[n]);
+    for (size_t n = 0; n < cells_.size(); ++n) cdf_[n] = total_ += power_[n];
 }
 
 EmissionPoints::Sample EmissionPoints::sample(double uCell, double ux, double uy, double uz) const {
@@ -79,7 +89,7 @@ EmissionPoints::Sample EmissionPoints::sample(double uCell, double ux, double uy
                   l = static_cast<int64_t>(k & 0x1FFFFF) - (1 << 20);
     const double x = x0_ + (static_cast<double>(i) + ux) * lateral_, y = yTop_ - (static_cast<double>(j) + uy) * lateral_,
                  z = z0_ + (static_cast<double>(l) + uz) * axial_;
-    return {centre_ + right_ * x + up_ * y + axis_ * z, power_.at(k) / total_ / (lateral_ * lateral_ * axial_)};
+    return {centre_ + right_ * x + up_ * y + axis_ * z, power_[n] / total_ / (lateral_ * lateral_ * axial_)};
 }
 
 double EmissionPoints::pdf(const Vec3& p) const {
@@ -88,8 +98,9 @@ double EmissionPoints::pdf(const Vec3& p) const {
     const int64_t i = static_cast<int64_t>(std::floor((dot(d, right_) - x0_) / lateral_));
     const int64_t j = static_cast<int64_t>(std::floor((yTop_ - dot(d, up_)) / lateral_));
     const int64_t l = static_cast<int64_t>(std::floor((dot(d, axis_) - z0_) / axial_));
-    const auto it = power_.find(key(i, j, l));
-    return it == power_.end() ? 0.0 : it->second / total_ / (lateral_ * lateral_ * axial_);
+    const uint64_t k = key(i, j, l);
+    const auto it = std::lower_bound(cells_.begin(), cells_.end(), k);
+    return it == cells_.end() || *it != k ? 0.0 : power_[static_cast<size_t>(it - cells_.begin())] / total_ / (lateral_ * lateral_ * axial_);
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -141,7 +152,11 @@ UnscatteredModel::UnscatteredModel(const Scene& scene, const std::vector<Light>&
     const std::vector<BeamLine> lines = beamLines(lights);
     if (lines.size() > kMaxBeamLines)
         throw ConfigError("unscattered image: at most " + std::to_string(kMaxBeamLines) + " beam lines per channel, got " + std::to_string(lines.size()));
-    m.dyes = channelDyes(scene, lines, plan, m.detection, m.o.spectralNodes);
+    std::vector<double> lineIrradiance(lines.size(), 0.0);
+    for (size_t l = 0; l < lines.size(); ++l)
+        for (int side = 0; side < lines[l].profile->sides(); ++side)
+            lineIrradiance[l] += lines[l].profile->irradiance(plane.centre(), side, lines[l].lambdaNm) * lines[l].weight;
+    m.dyes = channelDyes(scene, lines, plan, m.detection, m.o.spectralNodes, lineIrradiance, m.o.dropDyesBelow);
     if (m.dyes.empty()) return;
 
     double lambdaMax = 0, lambdaMin = 1e9;

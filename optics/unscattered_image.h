@@ -47,6 +47,9 @@ struct UnscatteredOptions {
     double farBinUm = 2;
     int nearPixels = 2;                 // the exact part of each kernel reaches this far beyond the defocus disc
     int nearTaperPixels = 3;            // over which it hands over to the far part
+    // Dyes whose photoelectrons per mol/L in the channel fall below this fraction of its most efficient
+    // dye's are left out of the computed image (and, covered by it, of the paths' core emission too).
+    double dropDyesBelow = 1e-5;
     void validate() const;              // ConfigError naming the option and value
 };
 
@@ -73,8 +76,9 @@ private:
     uint64_t key(int64_t i, int64_t j, int64_t l) const;
     Vec3 right_, up_, axis_, centre_;
     double x0_, yTop_, z0_, lateral_, axial_;
-    std::unordered_map<uint64_t, double> power_;
-    std::vector<uint64_t> cells_;
+    std::vector<std::pair<uint64_t, double>> pending_;  // cells and powers as added, before finish()
+    std::vector<uint64_t> cells_;                        // sorted
+    std::vector<double> power_;                          // of each cell
     std::vector<double> cdf_;
     double total_ = 0;
 };

@@ -25,7 +25,13 @@ ProgressBar::ProgressBar(std::string label)
 
 void ProgressBar::update(double f) {
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-    const double eta = f > 0 ? elapsed * (1 - f) / f : NAN;
+    // The rate since the first progress, so that set-up before it (a scene, a PSF, the computed image's
+    // lattice) is not extrapolated over the run; no ETA until 2 % and a second of work have been seen.
+    if (firstFraction_ < 0 && f > 0) firstFraction_ = f, firstElapsed_ = elapsed;
+    double eta = NAN;
+    if (firstFraction_ >= 0 && f - firstFraction_ >= 0.02 && elapsed - firstElapsed_ >= 1)
+        eta = (elapsed - firstElapsed_) * (1 - f) / (f - firstFraction_);
+    if (f >= 1) eta = 0;
     if (tty_) {
         if (elapsed - lastDraw_ < 0.1 && f < 1) return;
         lastDraw_ = elapsed;

@@ -1,6 +1,7 @@
 #pragma once
 // A one-line progress bar with ETA on stderr (redrawn only when stderr is a terminal, otherwise
-// printed every 10%).
+// printed every 10%). The ETA extrapolates the rate since progress first moved, and shows "--" until
+// it has seen 2 % and a second of work.
 #include <chrono>
 #include <string>
 
@@ -18,6 +19,7 @@ private:
     bool tty_;
     int lastDecile_ = -1;
     double lastDraw_ = -1;
+    double firstFraction_ = -1, firstElapsed_ = 0;  // when progress first moved
 };
 
 }  // namespace fluorosim::app

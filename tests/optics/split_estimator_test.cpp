@@ -114,7 +114,7 @@ void expectSameImage(double sigmaS, int pathSpp, int splitSpp) {
 
 TEST(SplitEstimator, MatchesThePathEstimatorInClearTissue) { expectSameImage(0.0, 256, 4); }
 
-TEST(SplitEstimator, MatchesThePathEstimatorInScatteringTissue) { expectSameImage(2.0, 1024, 512); }
+TEST(SplitEstimator, MatchesThePathEstimatorInScatteringTissue) { expectSameImage(2.0, 1024, 1024); }
 
 // Adaptive sampling (AcquireOptions::noiseRatio) decides each pixel's number of paths from pilot paths
 // it then discards, so its mean is that of the fixed-spp estimator; it spends the paths where the
