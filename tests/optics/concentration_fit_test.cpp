@@ -572,3 +572,66 @@ TEST(ConcentrationFit, ModelMismatchBiasesAreReported) {
 
 }  // namespace
 }  // namespace fluorosim
+
+namespace fluorosim {
+namespace {
+
+// The coarse grid's bias and variance against the prior's weight: the concentration gradient of
+// CoarseGridRecoversAConcentrationGradient, 12 noise realisations per weight, over the nodes with SNR
+// >= 20. A larger weight trades variance for bias; the table goes to docs/inverse.md.
+TEST(ConcentrationFit, CoarseGridTradesVarianceForBiasWithThePriorWeight) {
+    auto profile = [](double x) { return 1 + 0.1 * (x + 10); };
+    testing::FitSceneOptions truthOptions;
+    truthOptions.profile = profile;
+    truthOptions.power488mW = truthOptions.power561mW = 0.004;
+    FitSetup truth(truthOptions);
+    ASSERT_TRUE(truth.op->refreshGains(truth.scene));
+    const std::vector<double> mu = truth.expected(truth.op->columns(*truth.map), {1, 1, 1});
+    testing::FitSceneOptions templateOptions;
+    templateOptions.power488mW = templateOptions.power561mW = 0.004;
+    FitSetup s(templateOptions);
+    ASSERT_TRUE(s.op->refreshGains(s.scene));
+    const optics::ParameterMap grid = optics::ParameterMap::grid(0.004, s.op->lattices());
+    const optics::SparseColumns cols = s.op->columns(grid);
+    optics::FitOptions o;
+    o.parametrisation = optics::FitParametrisation::Grid;
+    o.scattered = optics::ScatteredModel::None;
+    const optics::LinearPoissonFit fit(cols, std::vector<double>(mu.size(), s.noise.darkElectrons), s.noise, grid, o);
+    const optics::Detector camera(s.microscope.detector);
+    // The nodes the data measure (SNR >= 20 in the discrepancy-rule fit of the first realisation).
+    const std::vector<uint16_t> first = camera.readOut(mu, 100, 0);
+    const auto reference = fit.solve(std::vector<double>(first.begin(), first.end()), true, std::vector<double>(grid.size(), 1.0), -1);
+    std::vector<size_t> nodes;
+    for (size_t j = 0; j < grid.size(); ++j)
+        if (reference.snr[j] >= 20) nodes.push_back(j);
+    ASSERT_GT(nodes.size(), 5u);
+    std::printf("  discrepancy rule: weight %.3g; %zu nodes with SNR >= 20\n", reference.priorWeight, nodes.size());
+    std::printf("  %10s %12s %12s %12s\n", "weight", "bias^2", "variance", "mse");
+    const int n = 12;
+    std::vector<double> bias2s, variances;
+    for (double alpha : {0.0, 1.0, 10.0, 100.0, 1e3, 1e4, 1e5}) {
+        std::vector<std::vector<double>> est(nodes.size());
+        for (int r = 0; r < n; ++r) {
+            const std::vector<uint16_t> adu = camera.readOut(mu, 200, static_cast<uint64_t>(r));
+            const auto sol = fit.solve(std::vector<double>(adu.begin(), adu.end()), true, std::vector<double>(grid.size(), 1.0), alpha, false);
+            for (size_t k = 0; k < nodes.size(); ++k) est[k].push_back(sol.theta[nodes[k]]);
+        }
+        double bias2 = 0, variance = 0;
+        for (size_t k = 0; k < nodes.size(); ++k) {
+            const double t = profile(grid.parameters()[nodes[k]].centreMm.x * 1e3);
+            double m = 0, v = 0;
+            for (double e : est[k]) m += e / n;
+            for (double e : est[k]) v += (e - m) * (e - m) / (n - 1);
+            bias2 += (m - t) * (m - t) / static_cast<double>(nodes.size());
+            variance += v / static_cast<double>(nodes.size());
+        }
+        bias2s.push_back(bias2);
+        variances.push_back(variance);
+        std::printf("  %10.3g %12.4g %12.4g %12.4g\n", alpha, bias2, variance, bias2 + variance);
+    }
+    EXPECT_LT(variances.back(), 0.5 * variances.front()) << "the prior lowers the variance";
+    EXPECT_GT(bias2s.back(), bias2s.front()) << "and raises the bias";
+}
+
+}  // namespace
+}  // namespace fluorosim
