@@ -279,9 +279,9 @@ std::string omeXml(int width, int height, int planes, int channels, const std::s
     const long long pages = static_cast<long long>(planes) * channels * meta.timePoints;
     x += "      <TiffData" + attr("IFD", 0LL) + attr("PlaneCount", pages) + "/>\n";
     for (int t = 0; t < meta.timePoints; ++t)
-    for (int c = 0; c < channels; ++c)
-        for (int z = 0; z < planes; ++z)
-            x += "      <Plane" + attr("TheZ", static_cast<long long>(z)) + attr("TheT", static_cast<long long>(t)) + attr("TheC", static_cast<long long>(c)) +
+        for (int c = 0; c < channels; ++c)
+            for (int z = 0; z < planes; ++z)
+                x += "      <Plane" + attr("TheZ", static_cast<long long>(z)) + attr("TheT", static_cast<long long>(t)) + attr("TheC", static_cast<long long>(c)) +
                  attr("ExposureTime", meta.exposureS) + attr("ExposureTimeUnit", std::string("s")) +
                  attr("PositionZ", z * meta.zStepUm) + attr("PositionZUnit", um) + "/>\n";
     x += "    </Pixels>\n";

@@ -249,8 +249,11 @@ TEST(ConcentrationFit, MaximumLikelihoodStaysUnbiasedDownToOnePhotonWherePearson
                         (e.mean[0] - kTruth[0]) / std::sqrt(e.variance[0] / n), (e.mean[1] - kTruth[1]) / std::sqrt(e.variance[1] / n),
                         (e.mean[2] - kTruth[2]) / std::sqrt(e.variance[2] / n), worst);
             // 15 comparisons (5 levels x 3 labels): 3.4 standard errors is a 1 % family-wise level (Bonferroni).
-            if (l == optics::FitLikelihood::Deviance) EXPECT_LE(worst, 3.4) << "peak " << photons;
-            else if (photons <= 10) EXPECT_GE(worst, 5) << "Pearson weights should be visibly biased at " << photons << " e-";
+            if (l == optics::FitLikelihood::Deviance) {
+                EXPECT_LE(worst, 3.4) << "peak " << photons;
+            } else if (photons <= 10) {
+                EXPECT_GE(worst, 5) << "Pearson weights should be visibly biased at " << photons << " e-";
+            }
         }
     }
 }
