@@ -103,39 +103,25 @@ struct PixelTally {
     double varianceOfMean() const { return n > 1 ? std::max(0.0, sum2 / n - sqr(sum / n)) / (n - 1) : 0.0; }
 };
 
-// Adds the pooled parts to an image: per level k, the rows' sums of pixel means by block column become
-// block means (summed in row order, whatever the thread count), interpolated bilinearly between block
-// centres to every pixel, with their variances by the same weights squared.
-template <class Rows, class SumOf, class VarianceOf>
-void addPooledParts(const Rows& rows, int width, int height, PlaneImage& r, SumOf sumOf, VarianceOf varianceOf) {
-    std::vector<double> variance(r.electrons.size());
-    for (size_t i = 0; i < variance.size(); ++i) variance[i] = sqr(r.stderrElectrons[i]);
-    for (int k = 1; k < kImageLevels; ++k) {
-        const int block = 1 << k, bx = ((width - 1) >> k) + 1, by = ((height - 1) >> k) + 1;
-        std::vector<double> mean(static_cast<size_t>(bx) * by, 0.0), var(mean.size(), 0.0);
-        bool any = false;
-        for (int y = 0; y < height; ++y) {
-            const std::vector<double>& sum = sumOf(rows[static_cast<size_t>(y)], k);
-            if (sum.empty()) continue;
-            any = true;
-            const std::vector<double>& v = varianceOf(rows[static_cast<size_t>(y)], k);
-            for (int c = 0; c < bx; ++c) {
-                mean[static_cast<size_t>((y >> k) * bx + c)] += sum[static_cast<size_t>(c)];
-                var[static_cast<size_t>((y >> k) * bx + c)] += v[static_cast<size_t>(c)];
-            }
-        }
-        if (!any) continue;
-        for (int cy = 0; cy < by; ++cy)
-            for (int cx = 0; cx < bx; ++cx) {
-                const double pixels = double(std::min(block, width - cx * block)) * std::min(block, height - cy * block);
-                mean[static_cast<size_t>(cy * bx + cx)] /= pixels;
-                var[static_cast<size_t>(cy * bx + cx)] /= pixels * pixels;
-            }
-        auto axis = [&](int p, int blocks, int* c0, int* c1, double* f) {
+// Blocks of 2^k × 2^k pixels over an image, the last ones cut by its edge, and the bilinear weights that
+// spread block means back to every pixel: the pooling's one rule, for the total and for each label.
+struct PoolingBlocks {
+    int width, height, k, block, bx, by;
+    PoolingBlocks(int w, int h, int level) : width(w), height(h), k(level), block(1 << level), bx(((w - 1) >> level) + 1), by(((h - 1) >> level) + 1) {}
+    size_t count() const { return static_cast<size_t>(bx) * by; }
+    size_t of(int x, int y) const { return static_cast<size_t>((y >> k) * bx + (x >> k)); }
+    double pixels(size_t b) const {
+        const int cx = static_cast<int>(b % static_cast<size_t>(bx)), cy = static_cast<int>(b / static_cast<size_t>(bx));
+        return double(std::min(block, width - cx * block)) * std::min(block, height - cy * block);
+    }
+    // f(pixel, weights): the four (block, weight) pairs that interpolate between block centres at a pixel.
+    template <class F>
+    void forEachPixel(F&& f) const {
+        auto axis = [&](int p, int blocks, int* c0, int* c1, double* t) {
             const double u = (p + 0.5) / block - 0.5;
             *c0 = std::clamp(static_cast<int>(std::floor(u)), 0, blocks - 1);
             *c1 = std::min(*c0 + 1, blocks - 1);
-            *f = std::clamp(u - *c0, 0.0, 1.0);
+            *t = std::clamp(u - *c0, 0.0, 1.0);
         };
         for (int y = 0; y < height; ++y) {
             int y0, y1, x0, x1;
@@ -147,49 +133,64 @@ void addPooledParts(const Rows& rows, int width, int height, PlaneImage& r, SumO
                                                                   {static_cast<size_t>(y0 * bx + x1), fx * (1 - fy)},
                                                                   {static_cast<size_t>(y1 * bx + x0), (1 - fx) * fy},
                                                                   {static_cast<size_t>(y1 * bx + x1), fx * fy}}};
-                double m = 0, v = 0;
-                for (const auto& [i, wi] : w) {
-                    m += wi * mean[i];
-                    v += wi * wi * var[i];
-                }
-                const size_t pixel = static_cast<size_t>(y) * width + x;
-                r.electrons[pixel] += m;
-                variance[pixel] += v;
-                r.pathElectrons += m;
-                r.pooledElectrons += m;
+                f(static_cast<size_t>(y) * width + x, w);
             }
         }
+    }
+};
+
+// Adds the pooled parts to an image: per level k, the rows' sums of pixel means by block column become
+// block means (summed in row order, whatever the thread count), interpolated bilinearly between block
+// centres to every pixel, with their variances by the same weights squared.
+template <class Rows, class SumOf, class VarianceOf>
+void addPooledParts(const Rows& rows, int width, int height, PlaneImage& r, SumOf sumOf, VarianceOf varianceOf) {
+    std::vector<double> variance(r.electrons.size());
+    for (size_t i = 0; i < variance.size(); ++i) variance[i] = sqr(r.stderrElectrons[i]);
+    for (int k = 1; k < kImageLevels; ++k) {
+        const PoolingBlocks blocks(width, height, k);
+        std::vector<double> mean(blocks.count(), 0.0), var(mean.size(), 0.0);
+        bool any = false;
+        for (int y = 0; y < height; ++y) {
+            const std::vector<double>& sum = sumOf(rows[static_cast<size_t>(y)], k);
+            if (sum.empty()) continue;
+            any = true;
+            const std::vector<double>& v = varianceOf(rows[static_cast<size_t>(y)], k);
+            for (int c = 0; c < blocks.bx; ++c) {
+                mean[static_cast<size_t>((y >> k) * blocks.bx + c)] += sum[static_cast<size_t>(c)];
+                var[static_cast<size_t>((y >> k) * blocks.bx + c)] += v[static_cast<size_t>(c)];
+            }
+        }
+        if (!any) continue;
+        for (size_t b = 0; b < mean.size(); ++b) {
+            mean[b] /= blocks.pixels(b);
+            var[b] /= blocks.pixels(b) * blocks.pixels(b);
+        }
+        blocks.forEachPixel([&](size_t pixel, const std::array<std::pair<size_t, double>, 4>& w) {
+            double m = 0, v = 0;
+            for (const auto& [i, wi] : w) {
+                m += wi * mean[i];
+                v += wi * wi * var[i];
+            }
+            r.electrons[pixel] += m;
+            variance[pixel] += v;
+            r.pathElectrons += m;
+            r.pooledElectrons += m;
+        });
     }
     for (size_t i = 0; i < variance.size(); ++i) r.stderrElectrons[i] = std::sqrt(variance[i]);
 }
 
-// An image of per-pixel means pooled over blocks of 2^k pixels: the block means interpolated bilinearly
-// between block centres (addPooledParts' rule, for one image).
+// An image of per-pixel means pooled over blocks of 2^k pixels (addPooledParts' rule, for one image).
 std::vector<double> poolImage(const std::vector<double>& image, int width, int height, int k) {
-    const int block = 1 << k, bx = ((width - 1) >> k) + 1, by = ((height - 1) >> k) + 1;
-    std::vector<double> mean(static_cast<size_t>(bx) * by, 0.0);
+    const PoolingBlocks blocks(width, height, k);
+    std::vector<double> mean(blocks.count(), 0.0);
     for (int y = 0; y < height; ++y)
-        for (int x = 0; x < width; ++x) mean[static_cast<size_t>((y >> k) * bx + (x >> k))] += image[static_cast<size_t>(y) * width + x];
-    for (int cy = 0; cy < by; ++cy)
-        for (int cx = 0; cx < bx; ++cx)
-            mean[static_cast<size_t>(cy * bx + cx)] /= double(std::min(block, width - cx * block)) * std::min(block, height - cy * block);
-    auto axis = [&](int p, int blocks, int* c0, int* c1, double* f) {
-        const double u = (p + 0.5) / block - 0.5;
-        *c0 = std::clamp(static_cast<int>(std::floor(u)), 0, blocks - 1);
-        *c1 = std::min(*c0 + 1, blocks - 1);
-        *f = std::clamp(u - *c0, 0.0, 1.0);
-    };
+        for (int x = 0; x < width; ++x) mean[blocks.of(x, y)] += image[static_cast<size_t>(y) * width + x];
+    for (size_t b = 0; b < mean.size(); ++b) mean[b] /= blocks.pixels(b);
     std::vector<double> out(image.size(), 0.0);
-    for (int y = 0; y < height; ++y) {
-        int y0, y1, x0, x1;
-        double fy, fx;
-        axis(y, by, &y0, &y1, &fy);
-        for (int x = 0; x < width; ++x) {
-            axis(x, bx, &x0, &x1, &fx);
-            out[static_cast<size_t>(y) * width + x] = (1 - fx) * (1 - fy) * mean[static_cast<size_t>(y0 * bx + x0)] + fx * (1 - fy) * mean[static_cast<size_t>(y0 * bx + x1)] +
-                                                      (1 - fx) * fy * mean[static_cast<size_t>(y1 * bx + x0)] + fx * fy * mean[static_cast<size_t>(y1 * bx + x1)];
-        }
-    }
+    blocks.forEachPixel([&](size_t pixel, const std::array<std::pair<size_t, double>, 4>& w) {
+        for (const auto& [i, wi] : w) out[pixel] += wi * mean[i];
+    });
     return out;
 }
 

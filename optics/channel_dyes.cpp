@@ -103,10 +103,7 @@ ChannelDyes channelDyes(const Scene& scene, const std::vector<BeamLine>& lines, 
         std::vector<int> slot(scene.media.size(), 0);
         for (size_t i = 0; i < c.dyes.size(); ++i) {
             EmittingDye t = c.dyes[i];
-            if (efficiency[i] < dropBelow * best) {
-                kept.dropped.push_back(scene.media[static_cast<size_t>(t.medium)].name() + ": " + t.name);
-                continue;
-            }
+            if (efficiency[i] < dropBelow * best) continue;
             t.slot = slot[static_cast<size_t>(t.medium)]++;
             if (kept.firstOfMedium[static_cast<size_t>(t.medium)] < 0) kept.firstOfMedium[static_cast<size_t>(t.medium)] = static_cast<int>(kept.dyes.size());
             keptDensity.push_back(dyeDensity[i]);

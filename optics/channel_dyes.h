@@ -33,7 +33,6 @@ struct ChannelDyes {
     std::vector<int> firstOfMedium;       // per medium: index of its first emitting dye, or -1
     int slots = 0;                        // the most emitting dyes of one medium
     double shortestDetectedNm = 0;        // with 1e-3 of the detected band below it (the pixel quadrature's band)
-    std::vector<std::string> dropped;     // dyes left out for their efficiency (medium: dye)
     bool empty() const { return dyes.empty(); }
     // The emitting dye of `medium` in `slot`, or nullptr.
     const EmittingDye* dyeOf(int medium, int slot) const;

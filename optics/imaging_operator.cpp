@@ -240,10 +240,7 @@ PlaneTerms planeTerms(const UnscatteredModel& model, const EmissionLattice& latt
                 if (e.slot == s && e.coefficient != 0) t.entries.push_back(e);
             if (t.entries.size() == before) continue;
             t.entryStart.push_back(static_cast<uint32_t>(before));
-            PointEmission em;
-            em.u = (q.x - g.xLeft()) / g.pixelMm;
-            em.v = (g.yTop() - q.y) / g.pixelMm;
-            em.layer = g.layerPosition(q.z, offset);
+            PointEmission em = pointEmission(g, q, offset);
             em.e = gs;
             em.dye = static_cast<uint32_t>(model.dyes().firstOfMedium[static_cast<size_t>(q.medium)] + s);
             t.emissions.push_back(em);

@@ -108,7 +108,6 @@ double EmissionPoints::pdf(const Vec3& p) const {
 
 struct UnscatteredModel::Impl {
     UnscatteredOptions o;
-    std::function<double(double)> detection;
     std::vector<Light> lights;  // at the reference plane
     ChannelDyes dyes;
     LatticeGeometry geometry;
@@ -134,7 +133,6 @@ UnscatteredModel::UnscatteredModel(const Scene& scene, const std::vector<Light>&
         if (!std::isfinite(o)) throw ConfigError("unscattered image: plane offsets must be finite");
     Impl& m = *impl_;
     m.o = options;
-    m.detection = std::move(detection);
     m.lights = lights;
     m.labels = labels;
     m.reference = std::make_unique<Imaging>(plane);
@@ -156,7 +154,7 @@ UnscatteredModel::UnscatteredModel(const Scene& scene, const std::vector<Light>&
     for (size_t l = 0; l < lines.size(); ++l)
         for (int side = 0; side < lines[l].profile->sides(); ++side)
             lineIrradiance[l] += lines[l].profile->irradiance(plane.centre(), side, lines[l].lambdaNm) * lines[l].weight;
-    m.dyes = channelDyes(scene, lines, plan, m.detection, m.o.spectralNodes, lineIrradiance, m.o.dropDyesBelow);
+    m.dyes = channelDyes(scene, lines, plan, detection, m.o.spectralNodes, lineIrradiance, m.o.dropDyesBelow);
     if (m.dyes.empty()) return;
 
     double lambdaMax = 0, lambdaMin = 1e9;
@@ -294,46 +292,31 @@ std::unique_ptr<EmissionGains> UnscatteredModel::gainsFor(const Scene& scene, in
     return g;
 }
 
+PointEmission pointEmission(const LatticeGeometry& g, const LatticePoint& q, double planeOffsetMm) {
+    PointEmission em;
+    em.u = (q.x - g.xLeft()) / g.pixelMm;
+    em.v = (g.yTop() - q.y) / g.pixelMm;
+    em.layer = g.layerPosition(q.z, planeOffsetMm);
+    return em;
+}
+
 std::vector<PointEmission> planeEmissions(const UnscatteredModel& model, const EmissionLattice& lattice, const EmissionGains& gains,
-                                          const std::vector<Light>& lights, double planeOffsetMm, int threads,
-                                          const std::function<int(uint32_t key)>& byLabel) {
+                                          const std::vector<Light>& lights, double planeOffsetMm, int threads) {
     const LatticeGeometry& g = model.geometry();
-    const ChannelDyes& dyes = model.dyes();
-    const double h = g.halfDepthMm();
-    const auto [first, last] = lattice.zRange(planeOffsetMm - h, planeOffsetMm + h);
+    const auto [first, last] = lattice.zRange(planeOffsetMm - g.halfDepthMm(), planeOffsetMm + g.halfDepthMm());
     std::vector<double> gain;
     gains.planeGains(lights, planeOffsetMm, first, last, gain, threads);
     const int slots = lattice.slots();
-    const double xLeft = g.xLeft(), yTop = g.yTop();
     std::vector<PointEmission> out;
-    if (byLabel && !lattice.hasParts()) throw ConfigError("unscattered image: emissions by label need a lattice built with labels");
     for (size_t p = first; p < last; ++p) {
         const LatticePoint& q = lattice.point(p);
-        const size_t row = (p - first) * static_cast<size_t>(slots);
-        PointEmission em;
-        em.u = (q.x - xLeft) / g.pixelMm;
-        em.v = (yTop - q.y) / g.pixelMm;
-        em.layer = g.layerPosition(q.z, planeOffsetMm);
-        const int firstDye = dyes.firstOfMedium[static_cast<size_t>(q.medium)];
-        if (!byLabel) {
-            for (int slot = 0; slot < slots; ++slot) {
-                const double e = gain[row + static_cast<size_t>(slot)] * lattice.concentration(p, slot);
-                if (!(e > 0)) continue;
-                em.e = e;
-                em.dye = static_cast<uint32_t>(firstDye + slot);
-                em.target = 0;
-                out.push_back(em);
-            }
-            continue;
-        }
-        for (const EmissionLattice::Part* part = lattice.partsBegin(p); part != lattice.partsEnd(p); ++part) {
-            const double e = gain[row + part->slot] * part->value;
+        PointEmission em = pointEmission(g, q, planeOffsetMm);
+        const int firstDye = model.dyes().firstOfMedium[static_cast<size_t>(q.medium)];
+        for (int slot = 0; slot < slots; ++slot) {
+            const double e = gain[(p - first) * static_cast<size_t>(slots) + static_cast<size_t>(slot)] * lattice.concentration(p, slot);
             if (!(e > 0)) continue;
-            const int target = byLabel(part->key);
-            if (target < 0) continue;
             em.e = e;
-            em.dye = static_cast<uint32_t>(firstDye + part->slot);
-            em.target = static_cast<uint32_t>(target);
+            em.dye = static_cast<uint32_t>(firstDye + slot);
             out.push_back(em);
         }
     }

@@ -22,8 +22,6 @@
 #include <atomic>
 #include <functional>
 #include <memory>
-#include <mutex>
-#include <unordered_map>
 #include <vector>
 
 #include "optics/emission_gains.h"
@@ -147,11 +145,11 @@ private:
 UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<Light>& lights, const Imaging& plane,
                                          const UnscatteredModel& model, int threads = 0, const std::atomic<bool>* cancel = nullptr);
 
+// Where a lattice point lands for the projector in the plane at `planeOffsetMm` (e, dye, target unset).
+PointEmission pointEmission(const LatticeGeometry& geometry, const LatticePoint& point, double planeOffsetMm);
 // The emissions of a plane for the projector: each lattice point lit in the plane, per dye, with e = its
-// gain × `concentration(point, slot)`, sent to target 0. With `byLabel`, one emission per label part
-// instead, sent to target `byLabel(key)` (skipped where it returns a negative target).
+// gain × its concentration, sent to target 0.
 std::vector<PointEmission> planeEmissions(const UnscatteredModel& model, const EmissionLattice& lattice, const EmissionGains& gains,
-                                          const std::vector<Light>& lights, double planeOffsetMm, int threads,
-                                          const std::function<int(uint32_t key)>& byLabel = {});
+                                          const std::vector<Light>& lights, double planeOffsetMm, int threads);
 
 }  // namespace fluorosim::optics

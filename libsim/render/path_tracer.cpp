@@ -309,8 +309,8 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double
             if (Lx[k] == 0 || wlx.pdf[k] == 0) continue;
             for (int j = 0; j < kNumWavelengths; ++j) {
                 if (weight[j] == 0) continue;
-                const double a = weight[j] * fluorescence_.kernel(medium, parts[i].channels.data(), wlx.lambda[k], wl.lambda[j]) / (wlx.pdf[k] * kNumWavelengths);
-                partResults[i][j] += a / (start[k] * survival) * Lx[k];
+                const double share = weight[j] * fluorescence_.kernel(medium, parts[i].channels.data(), wlx.lambda[k], wl.lambda[j]) / (wlx.pdf[k] * kNumWavelengths);
+                partResults[i][j] += share / (start[k] * survival) * Lx[k];
             }
         }
     return result;
@@ -511,7 +511,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         SampledSpectrum source(0.0);
         if (!st.imaging->computesUnscatteredAt(point->p)) return source;
         std::array<LabelledChannels, kMaxLabelsAtPoint> parts;
-        std::array<SampledSpectrum, kMaxLabelsAtPoint> partSources{};
+        std::array<SampledSpectrum, kMaxLabelsAtPoint> partSources;
         const int partCount = st.labels ? st.labels->split(pointMedium, point->p, ch.data(), parts) : 0;
         for (const SpectralLine& l : profile.spectrum().spectralLines()) {
             if (!(l.power > 0) || !profile.inCore(point->p, side, l.lambdaNm)) continue;

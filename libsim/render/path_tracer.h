@@ -62,9 +62,11 @@ struct PathRadiance {
 // Fluorescence split by what emitted it: the labelled objects (neurons) whose dye re-emits at a point,
 // for fits whose parameters are labels. A camera path's re-emission at p is linear in the dye there, so
 // each label's share follows from the fluorescence kernel of that label's part of the dye channels.
+// Left uninitialised (EmissionLabels::split fills the parts it returns): the tracer declares an array of
+// them at every branch point, with or without labels.
 struct LabelledChannels {
-    uint32_t key = 0;
-    ChannelValues channels{};  // the label's part of the medium's channels at p (dye channels only)
+    uint32_t key;
+    ChannelValues channels;  // the label's part of the medium's channels at p (dye channels only)
 };
 inline constexpr int kMaxLabelsAtPoint = 8;
 class EmissionLabels {
