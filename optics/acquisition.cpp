@@ -9,6 +9,7 @@
 #include "core/parallel.h"
 #include "core/rng.h"
 #include "render/fluorescence.h"
+#include "render/straight_line.h"
 
 namespace fluorosim::optics {
 namespace {
@@ -247,6 +248,7 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
     const double darkElectrons = detector.darkCurrentElectronsPerS * detector.exposureS;
     int rowsDone = 0;
     std::mutex progressMutex;  // the callback is called from one thread at a time
+    const bool bends = hasRefractingSurfaces(scene);
     parallelFor(static_cast<size_t>(height), o.threads, [&](size_t yRow) {
         if (o.cancel && o.cancel->load()) return;
         const int y = static_cast<int>(yRow);
@@ -280,9 +282,13 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                 const PathImaging pathImaging(imaging, model, emissionPoints.get(), point, o.poolingFraction);
                 pathStart.imaging = &pathImaging;
                 pathStart.labels = o.labels;
-                double cosT = 0;
-                const Ray ray = imaging.cameraRay(focal, rng.uniform(), rng.uniform(), &cosT);
-                const PathRadiance radiance = tracer.radiance(ray, scene.camera.medium, wl, rng, row.stats, pathStart);
+                const double uPhi = rng.uniform();  // drawn in the order the streams have always used
+                const double uCos = rng.uniform();
+                const Imaging::CameraStart cameraStart = imaging.cameraStart(scene, bends, focal, uCos, uPhi, wl);
+                const double cosT = cameraStart.cosTheta;
+                pathStart.beta *= cameraStart.weight;
+                pathStart.tMin = cameraStart.tMin;
+                const PathRadiance radiance = tracer.radiance(cameraStart.ray, cameraStart.medium, wl, rng, row.stats, pathStart);
                 auto electrons = [&](const SampledSpectrum& L) {
                     double e = 0;
                     for (int j = 0; j < kNumWavelengths; ++j)

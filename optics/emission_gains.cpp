@@ -111,26 +111,25 @@ EmissionGains::EmissionGains(const Scene& scene, const EmissionLattice& lattice,
         cameraWl.pdf[static_cast<size_t>(j)] = 1;
     }
     const QuadratureRule rings = gaussLegendre01(o.coneRings);
-    // The mean over the cone of the transmittance from p (at z in the stack frame) to where a camera path
-    // of the reference plane starts, at the working distance above its focal plane, in the camera's medium.
-    auto cameraTransmittance = [&](const Vec3& p, double z) {
+    // The mean over the cone of the transmittance from p (in `medium`) to the objective's front plane of the
+    // reference plane: straight in each medium, bent and Fresnel-weighted at each refracting surface.
+    auto cameraTransmittance = [&](const Vec3& p, int medium) {
         SampledSpectrum sum(0.0);
         for (size_t r = 0; r < rings.nodes.size(); ++r) {
             const double cosT = 1 - rings.nodes[r] * (1 - reference.cosMax());
             for (int a = 0; a < o.coneAzimuths; ++a) {
                 const Vec3 w = reference.coneDirection(cosT, 2 * kPi * (a + 0.5) / o.coneAzimuths);
-                const double distance = (reference.workingDistanceMm() - z) / cosT;
-                if (!(distance > 0)) continue;
-                const Ray ray{p + w * distance, -w};
-                const StraightLine line = traceStraightLine(scene, ray, scene.camera.medium, 0.0, distance, LineSurfaces::StopAtAny);
-                if (line.end != LineEnd::Open) continue;
-                sum += quadratureTransmittance(scene, ray, line.segments, cameraWl, o.quadratureVoxels) * (rings.weights[r] / o.coneAzimuths);
+                const BentLine line = reference.collectionLine(scene, p, medium, w);
+                if (line.open) sum += quadratureTransmittance(scene, line, cameraWl, o.quadratureVoxels) * (rings.weights[r] / o.coneAzimuths);
             }
         }
         return sum;
     };
+    // The cone's rings in the immersion medium, bent from the sample's by Snell's law.
+    const double bend = reference.psf().pupil().sampleIndex / scene.ior(scene.camera.medium);
     for (size_t r = 0; r < rings.nodes.size(); ++r) {
-        coneCos_.push_back(1 - rings.nodes[r] * (1 - reference.cosMax()));
+        const double cosT = 1 - rings.nodes[r] * (1 - reference.cosMax());
+        coneCos_.push_back(bend == 1 ? cosT : std::sqrt(std::max(0.0, 1 - bend * bend * (1 - cosT * cosT))));
         coneWeight_.push_back(rings.weights[r]);
     }
     if (scene.camera.medium != kNone && scene.media[static_cast<size_t>(scene.camera.medium)].isHomogeneous()) {
@@ -162,7 +161,13 @@ EmissionGains::EmissionGains(const Scene& scene, const EmissionLattice& lattice,
             },
             beamGrid[s], cancel);
     std::vector<SampledSpectrum> cameraGrid;
-    grid.compute<SampledSpectrum>(threads, [&](double x, double y, double z) { return cameraTransmittance(g.world(x, y, z), z); }, cameraGrid, cancel);
+    grid.compute<SampledSpectrum>(
+        threads,
+        [&](double x, double y, double z) {
+            const Vec3 p = g.world(x, y, z);
+            return cameraTransmittance(p, mediumAt(scene, p, g.axis));
+        },
+        cameraGrid, cancel);
     if (cancel && cancel->load()) {
         complete_ = false;
         return;
@@ -181,7 +186,7 @@ EmissionGains::EmissionGains(const Scene& scene, const EmissionLattice& lattice,
         if (exactIndex[p] >= 0) {
             const Vec3 w = g.world(q.x, q.y, q.z);
             for (size_t s = 0; s < sides.size(); ++s) beamT_[p * sides_ + s] = static_cast<float>(beamTransmittance(w, q.medium, sides[s]));
-            cam = cameraTransmittance(w, q.z);
+            cam = cameraTransmittance(w, q.medium);
         } else {
             for (size_t s = 0; s < sides.size(); ++s) beamT_[p * sides_ + s] = static_cast<float>(grid.interpolate(q.x, q.y, q.z, beamGrid[s]));
             cam = grid.interpolate(q.x, q.y, q.z, cameraGrid);

@@ -50,6 +50,30 @@ Ray Imaging::cameraRay(const Vec3& focal, double uCos, double uPhi, double* cosT
     return Ray{focal + toObjective * workingDistanceMm_, -toObjective};
 }
 
+Imaging::CameraStart Imaging::cameraStart(const Scene& scene, bool bends, const Vec3& focal, double uCos, double uPhi,
+                                          const SampledWavelengths& wl) const {
+    CameraStart out;
+    out.ray = cameraRay(focal, uCos, uPhi, &out.cosTheta);
+    out.medium = scene.camera.medium;
+    if (!bends) return out;
+    // Straight down to the focal point first: most rays meet no refraction on the way.
+    if (traceStraightLine(scene, out.ray, out.medium, 0.0, workingDistanceMm_, LineSurfaces::UntilRefraction).end != LineEnd::Refraction) return out;
+    const Vec3 w = -out.ray.d;
+    const BentLine line = collectionLine(scene, focal, mediumAt(scene, focal, axis_), w);
+    if (!line.bent()) return out;
+    const BentLine::Piece& sample = line.pieces.front();
+    out.ray = Ray{line.pieces[1].ray.o, -w};
+    out.medium = sample.segments.empty() ? mediumAt(scene, focal, axis_) : sample.segments.back().medium;
+    const SurfaceHit& crossing = line.pieces[1].crossing;
+    out.tMin = crossing.epsilon / std::max(std::abs(dot(crossing.n, w)), 1e-2);
+    out.weight = quadratureTransmittance(scene, line, wl, 0.5, 1);
+    return out;
+}
+
+BentLine Imaging::collectionLine(const Scene& scene, const Vec3& p, int medium, const Vec3& w) const {
+    return traceBentLine(scene, Ray{p, w}, medium, centre_ + axis_ * workingDistanceMm_, axis_);
+}
+
 double Imaging::coneSolidAngle() const { return 2 * kPi * (1 - cosMax_); }
 
 SampledSpectrum Imaging::firstVertexWeight(const Vec3& pixelPoint, const Vec3& y, const SampledWavelengths& wl) const {
@@ -81,8 +105,10 @@ std::shared_ptr<const WidefieldPsf> makePsf(const Scene& scene, const ObjectiveO
                 break;
             }
     }
-    // Apodisation: the transmittance of camera rays to the focus by their angle, relative to the axis.
+    // Apodisation: the transmittance from the focus to the objective by the angle in the sample (Fresnel
+    // at each crossing, attenuation), relative to the axis.
     const Frame frame = Frame::fromNormal(axis);
+    const Vec3 objectivePlane = focus.centreMm + axis * objective.workingDistanceMm;
     const double sinMax = objective.na / pupil.sampleIndex;
     const SampledWavelengths wl = SampledWavelengths::atLine(emissionNm, 1.0);
     constexpr int kAngles = 16, kAzimuths = 8;
@@ -92,10 +118,8 @@ std::shared_ptr<const WidefieldPsf> makePsf(const Scene& scene, const ObjectiveO
         for (int a = 0; a < kAzimuths; ++a) {
             const double phi = 2 * kPi * (a + 0.5) / kAzimuths;
             const Vec3 w = frame.toWorld(Vec3(sinT * std::cos(phi), sinT * std::sin(phi), cosT));
-            const double distance = objective.workingDistanceMm / cosT;
-            const Ray ray{focus.centreMm + w * distance, -w};
-            const StraightLine line = traceStraightLine(scene, ray, scene.camera.medium, 0.0, distance, LineSurfaces::StopAtAny);
-            if (line.end == LineEnd::Open) apodization[static_cast<size_t>(i)] += quadratureTransmittance(scene, ray, line.segments, wl)[0] / kAzimuths;
+            const BentLine line = traceBentLine(scene, Ray{focus.centreMm, w}, sampleMedium, objectivePlane, axis);
+            apodization[static_cast<size_t>(i)] += quadratureTransmittance(scene, line, wl)[0] / kAzimuths;
         }
     }
     if (apodization[0] > 0) {

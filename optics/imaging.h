@@ -15,6 +15,7 @@
 
 #include "optics/microscope.h"
 #include "optics/widefield_psf.h"
+#include "render/straight_line.h"
 #include "spectral/sampled_wavelengths.h"
 
 namespace fluorosim::optics {
@@ -46,6 +47,23 @@ public:
     Vec3 pixelPoint(int x, int y, double ux, double uy) const;
     Vec3 displacement(double uRadius, double uAngle, double lambdaNm, double* radiusMm) const;
     Ray cameraRay(const Vec3& focal, double uCos, double uPhi, double* cosTheta) const;
+    // The same ray where the way to the objective bends (`bends`: the scene has refracting surfaces). The
+    // direction is uniform over the cone in the medium at the focal point, and the path starts just below
+    // the refraction nearest the focal point, in that medium, weighted by the transmittance of the rest of
+    // the way (Fresnel at each crossing, attenuation; scattering above the first crossing is left out).
+    // Without a refraction on the way it is cameraRay's ray, in the camera's medium, with weight 1.
+    struct CameraStart {
+        Ray ray;
+        int medium = kNone;
+        double tMin = 0;  // > 0: the ray starts on the surface it leaves
+        SampledSpectrum weight{1.0};
+        double cosTheta = 1;
+    };
+    CameraStart cameraStart(const Scene& scene, bool bends, const Vec3& focal, double uCos, double uPhi, const SampledWavelengths& wl) const;
+    // The way from p (in `medium`) along the cone direction w (toward the objective) to the objective's
+    // front plane, the working distance above this focal plane: straight in each medium, bent at each
+    // refracting surface. A point beyond that plane has no way (open = false).
+    BentLine collectionLine(const Scene& scene, const Vec3& p, int medium, const Vec3& w) const;
     // A direction of the cone from its polar cosine and azimuth (toward the objective).
     Vec3 coneDirection(double cosTheta, double phi) const;
     double cosMax() const { return cosMax_; }

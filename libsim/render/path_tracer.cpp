@@ -226,6 +226,7 @@ PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths&
     state.r_u = start.r_u;
     state.imaging = start.imaging;
     state.labels = start.labels;
+    state.tMin = start.tMin;
     state.firstSegment = true;
     state.prevScatter = ray.o;
     return trace(state, wl, rng, stats);

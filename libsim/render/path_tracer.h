@@ -113,6 +113,7 @@ struct PathStart {
     SampledSpectrum beta{1.0}, r_u{1.0};
     const CameraPathImaging* imaging = nullptr;  // none: a plain camera path
     const EmissionLabels* labels = nullptr;      // split the camera path's re-emissions by label (PathRadiance::labelled)
+    double tMin = 0;                             // > 0 when ray.o lies on a surface the ray leaves
 };
 
 // How a sub-path started at a branch point weighs its first vertex's connection to a beam's unscattered

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 
+#include "materials/fresnel.h"
 #include "media/free_flight.h"
 
 namespace fluorosim {
@@ -28,6 +29,7 @@ StraightLine traceStraightLine(const Scene& scene, const Ray& ray, int medium, d
         const bool nullInterface = s.isInterface && s.material == kNone;
         if (!nullInterface && surfaces != LineSurfaces::ThroughAll) {
             line.tEnd = t1;
+            line.endHit = *hit;
             if (surfaces == LineSurfaces::StopAtAny) {
                 line.end = LineEnd::Surface;
             } else {
@@ -45,6 +47,53 @@ StraightLine traceStraightLine(const Scene& scene, const Ray& ray, int medium, d
     line.end = LineEnd::Blocked;
     line.tEnd = tBase;
     return line;
+}
+
+BentLine traceBentLine(const Scene& scene, const Ray& ray, int medium, const Vec3& planePoint, const Vec3& planeNormal) {
+    BentLine out;
+    Ray r = ray;
+    double tMin = 0;
+    int current = medium;
+    SurfaceHit crossing;
+    // Each piece crosses one refracting surface; the cap only guards against a line trapped between two.
+    for (int pieces = 0; pieces < 64; ++pieces) {
+        const double approach = dot(r.d, planeNormal);
+        if (!(approach > 0)) return out;
+        const double tPlane = dot(planePoint - r.o, planeNormal) / approach;
+        if (!(tPlane > tMin)) {
+            // A start beyond the plane is not seen; a crossing on the plane itself is.
+            if (out.pieces.empty()) return out;
+            out.pieces.push_back({r, {}, crossing});
+            out.open = true;
+            return out;
+        }
+        StraightLine line = traceStraightLine(scene, r, current, tMin, tPlane, LineSurfaces::UntilRefraction);
+        out.pieces.push_back({r, std::move(line.segments), crossing});
+        if (line.end == LineEnd::Open) {
+            out.open = true;
+            return out;
+        }
+        if (line.end != LineEnd::Refraction) return out;
+        const ShapeInfo& s = scene.shapes[line.endHit.shape];
+        const Vec3 n = line.endHit.n;
+        const bool entering = dot(r.d, n) < 0;
+        const int next = entering ? s.insideMedium : s.outsideMedium, from = entering ? s.outsideMedium : s.insideMedium;
+        const double etaCrossed = scene.ior(next) / scene.ior(from);
+        Vec3 bent;
+        if (!refract(-r.d, n, scene.ior(s.insideMedium) / scene.ior(s.outsideMedium), &bent)) return out;
+        out.fresnel *= 1 - fresnelDielectric(std::abs(dot(r.d, n)), etaCrossed);
+        crossing = line.endHit;
+        r = Ray{line.endHit.p, normalize(bent)};
+        tMin = line.endHit.epsilon / std::max(std::abs(dot(n, r.d)), 1e-2);
+        current = next;
+    }
+    return out;
+}
+
+bool hasRefractingSurfaces(const Scene& scene) {
+    for (const ShapeInfo& s : scene.shapes)
+        if (s.isInterface && s.material != kNone && scene.materials[static_cast<size_t>(s.material)]->isSpecular()) return true;
+    return false;
 }
 
 int mediumAt(const Scene& scene, const Vec3& p, const Vec3& direction) {
@@ -98,6 +147,15 @@ SampledSpectrum quadratureTransmittance(const Scene& scene, const Ray& ray, cons
         }
     }
     return expNeg(opticalDepth);
+}
+
+SampledSpectrum quadratureTransmittance(const Scene& scene, const BentLine& line, const SampledWavelengths& wl, double stepVoxels,
+                                        size_t firstPiece) {
+    if (!line.open) return SampledSpectrum(0.0);
+    SampledSpectrum t(1.0);
+    for (size_t i = firstPiece; i < line.pieces.size(); ++i)
+        t *= quadratureTransmittance(scene, line.pieces[i].ray, line.pieces[i].segments, wl, stepVoxels);
+    return t * line.fresnel;
 }
 
 }  // namespace fluorosim
