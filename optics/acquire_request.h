@@ -26,10 +26,16 @@ struct AcquireRequest {
     std::vector<std::string> channels;  // names to acquire (default: all)
 };
 
-// What can be checked before the scene is read.
+// What can be checked before the scene is read (so that a typo is refused before loading and its warnings).
 inline void checkAcquireRequest(const AcquireRequest& a) {
     if (a.threads < 0 || a.threads > 4096) throw ConfigError("--threads: must lie in [0, 4096], got " + std::to_string(a.threads));
     if (a.seed && *a.seed < 0) throw ConfigError("--seed: must be >= 0, got " + std::to_string(*a.seed));
+    if (a.planes && (*a.planes < 1 || *a.planes > 4096)) throw ConfigError("--planes: must lie in [1, 4096], got " + std::to_string(*a.planes));
+    if (a.step && !(parseQuantity(*a.step, Dimension::Length, "--step") > 0)) throw ConfigError("--step: must be positive, got " + *a.step);
+    if (a.spp && (*a.spp < 1 || *a.spp > (1 << 24))) throw ConfigError("--spp: must lie in [1, 16777216], got " + std::to_string(*a.spp));
+    if (!estimatorFromName(a.estimator)) throw ConfigError("--estimator: expected \"split\" or \"path\", got \"" + a.estimator + "\"");
+    if (a.noiseRatio && (!(*a.noiseRatio > 0) || !std::isfinite(*a.noiseRatio)))
+        throw ConfigError("--noise-ratio: must be positive and finite, got " + std::to_string(*a.noiseRatio));
 }
 
 // The stack overrides (planes, step) of acquire and fit, applied to `m` and validated against the scene.

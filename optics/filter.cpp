@@ -3,21 +3,17 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
-#include <sstream>
 #include <utility>
 #include <vector>
 
 #include "core/errors.h"
+#include "core/message.h"
 #include "database.h"
 
 namespace fluorosim::optics {
 namespace {
 
-std::string num(double v) {
-    std::ostringstream os;
-    os << v;
-    return os.str();
-}
+std::string num(double v) { return messageNumber(v); }
 
 void requirePositive(double v, const std::string& field, const std::string& unit) {
     if (!(v > 0) || !std::isfinite(v)) throw ConfigError(field + ": must be positive and finite, got " + num(v) + unit);

@@ -2,19 +2,16 @@
 
 #include <algorithm>
 #include <cmath>
-#include <sstream>
+#include <set>
 
 #include "core/errors.h"
+#include "core/message.h"
 #include "database.h"
 
 namespace fluorosim::optics {
 namespace {
 
-std::string num(double v) {
-    std::ostringstream os;
-    os << v;
-    return os.str();
-}
+std::string num(double v) { return messageNumber(v); }
 
 // A beam moved by a fixed vector (a z-stack step): the profile at p is the original's at p - shift.
 class ShiftedBeam final : public BeamProfile {
@@ -86,7 +83,7 @@ DetectorOptions parseDetector(const SceneField& d) {
     }
     if (d.has("pixel_pitch")) o.pixelPitchUm = d.at("pixel_pitch").positiveQuantity(Dimension::Length) * 1e3;
     if (d.has("qe")) o.qe = Spectrum::constant(d.at("qe").number(0, 1));
-    if (d.has("exposure_s")) o.exposureS = d.at("exposure_s").number();
+    if (d.has("exposure_s")) o.exposureS = d.at("exposure_s").quantity(Dimension::Time, "s");
     if (d.has("gain_e_per_adu")) o.gainElectronsPerAdu = d.at("gain_e_per_adu").number();
     if (d.has("offset_adu")) o.offsetAdu = d.at("offset_adu").number();
     if (d.has("read_noise_e")) o.readNoiseElectrons = d.at("read_noise_e").number();
@@ -211,19 +208,53 @@ Microscope Microscope::fromScene(const Scene& scene, const spectra::Database& db
                 mc.excitationNm = lines[0].lambdaNm;
         if (mc.excitationNm == 0) c.failQuoted("its lights have no laser line; the stack's metadata needs an excitation wavelength");
         mc.emissionNm = measurePassBand(mc.emissionPath.curve()).centreNm();
-        // A filter that passes almost none of a dye's emission is worth a warning, not an error.
-        for (const Medium& med : scene.media)
-            for (const DyeComponent& d : med.dyes())
-                if (const auto w = emissionBlockingWarning(mc.filters, d.dye.emission(), d.dye.id()))
-                    out.warnings.push_back("channel \"" + mc.name + "\": " + *w);
+        mc.warnings = channelDyeWarnings(scene, mc);
         out.channels.push_back(std::move(mc));
     }
+    // The objective looks through the camera's medium: its index is the immersion the PSF assumes.
+    if (const double n = scene.ior(scene.camera.medium); std::abs(n - out.objective.immersionIndex) > 1e-3)
+        out.warnings.push_back("objective immersion_index " + num(out.objective.immersionIndex) + " differs from the index " + num(n) +
+                               " of the camera's medium" + (scene.camera.medium == kNone ? std::string(" (none: vacuum)") : " \"" + scene.media[static_cast<size_t>(scene.camera.medium)].name() + "\"") +
+                               ", which the objective looks through: the PSF assumes the first, the rays cross the second; give the camera the immersion medium");
     try {
         out.validate(scene);
     } catch (const ConfigError& e) {
         m.failQuoted(e.what());
     }
     return out;
+}
+
+std::vector<std::string> channelDyeWarnings(const Scene& scene, const MicroscopeChannel& channel) {
+    // A channel exists to see the dyes its own lasers excite: warn when it sees almost none of them (an
+    // AF594 channel behind a 525/45 filter), not for other channels' dyes it is meant to block.
+    constexpr double kExcited = 0.02, kSeen = 1e-3;
+    std::vector<double> lines;
+    for (size_t l : channel.lights)
+        for (const SpectralLine& line : emissionSpectrum(scene.lights[l]).spectralLines()) lines.push_back(line.lambdaNm);
+    std::string lineText;
+    for (double l : lines) lineText += (lineText.empty() ? "" : ", ") + num(l) + " nm";
+    std::vector<std::string> excited, blocked;
+    std::set<std::string> seenDyes;
+    for (const Medium& med : scene.media)
+        for (const DyeComponent& d : med.dyes()) {
+            if (!seenDyes.insert(d.dye.id()).second) continue;
+            double excitation = 0;
+            for (double l : lines) excitation = std::max(excitation, d.dye.molarExtinction(l) / d.dye.extinctionPeak());
+            if (excitation < kExcited) continue;
+            excited.push_back(d.dye.id());
+            const double seen = emissionPathEfficiency(channel.filters, d.dye.emission());
+            if (seen >= kSeen) return {};
+            blocked.push_back(d.dye.id() + " (" + num(std::round(100 * excitation)) + " % of its peak; the emission path passes " + num(seen) +
+                              " of its emission)");
+        }
+    if (seenDyes.empty() || lines.empty()) return {};
+    const std::string name = "channel \"" + channel.name + "\": ";
+    if (excited.empty())
+        return {name + "its laser lines (" + lineText + ") excite none of the scene's dyes above " + num(100 * kExcited) + " % of their peak"};
+    std::string list;
+    for (const std::string& b : blocked) list += (list.empty() ? "" : ", ") + b;
+    return {name + "its laser lines (" + lineText + ") excite " + list + ", but its emission path (" + channel.filters.emission.name() +
+            ") passes almost none of them: the channel will record almost nothing"};
 }
 
 void Microscope::validate(const Scene& scene) const {

@@ -41,7 +41,12 @@ struct MicroscopeChannel {
     Filter emissionPath = Filter::open();  // dichroic transmission times emission filter
     bool filteredExcitation = false;       // an excitation filter or a dichroic acts on the lights
     double excitationNm = 0, emissionNm = 0;  // for the stack's metadata
+    std::vector<std::string> warnings;        // channelDyeWarnings, printed only when the channel is acquired
 };
+
+// Warns when a channel's emission path passes almost none (< 1e-3) of every dye its own laser lines excite
+// (above 2 % of the dye's peak), or when its lines excite none of the scene's dyes.
+std::vector<std::string> channelDyeWarnings(const Scene& scene, const MicroscopeChannel& channel);
 
 struct StackGeometry {
     int planes = 1;
@@ -62,7 +67,7 @@ struct Microscope {
     // Throws ConfigError for inconsistent values (sizes, a stack larger than the memory cap, light
     // indices outside the scene).
     void validate(const Scene& scene) const;
-    std::vector<std::string> warnings;  // e.g. an emission path that blocks a dye of the scene
+    std::vector<std::string> warnings;  // of the microscope as a whole; each channel has its own
 
     double pixelSizeMm() const { return detector.pixelPitchUm * 1e-3 / objective.magnification; }
     // Plane k of the stack sits at this offset along the detection axis from the focus centre.

@@ -19,6 +19,7 @@
 #include "core/math.h"
 #include "core/units.h"
 #include "optics/acquire_request.h"
+#include "optics/setup_checks.h"
 #include "distributed_acquire.h"
 #include "optics/acquisition.h"
 #include "optics/stack_files.h"
@@ -73,6 +74,7 @@ void runAcquire(const AcquireArgs& a) {
     o.cancel = &gCancel;
 
     const std::vector<size_t> selected = m.selectChannels(a.channels, "--channels");
+    const std::vector<std::string> setupWarnings = optics::checkSetup(scene, m, selected);
     if (!cluster::isRoot()) {  // MPI: the other ranks render the planes that rank 0 hands out
         std::signal(SIGINT, onAcquireSignal);
         std::signal(SIGTERM, onAcquireSignal);
@@ -81,6 +83,9 @@ void runAcquire(const AcquireArgs& a) {
 
     const optics::StackOutputs out = optics::StackOutputs::forStack(a.output);
     requireWritableFolder(out.counts);
+    for (size_t c : selected)
+        for (const std::string& w : m.channels[c].warnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
+    for (const std::string& w : setupWarnings) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
     optics::Stack stack = optics::emptyStack(m, selected);
     const fs::path checkpointPath = fs::path(a.output).replace_extension("").replace_extension(".checkpoint");
     const std::string print = fingerprint(a, m, stack, o);
@@ -213,6 +218,13 @@ void runAcquire(const AcquireArgs& a) {
                                     {"max_expected_electrons", maxE},
                                     {"full_well_electrons", m.detector.fullWellElectrons}};
     std::printf("%s\n", summary.dump().c_str());
+    // An adaptive run that stopped at its path limit says so, with the noise it reached.
+    const double mcOverCameraMedian = median(mcOverCamera);
+    if (o.noiseRatio && mcOverCameraMedian > sqr(*o.noiseRatio) * 1.5)
+        std::fprintf(stderr,
+                     "fluorosim: warning: noise target %.3g missed: the Monte Carlo error over the camera's noise is %.3g (median over the "
+                     "brightest 10 %% of pixels, as a ratio of standard deviations), at %.3g paths per pixel on average (--max-spp %d)\n",
+                     *o.noiseRatio, std::sqrt(mcOverCameraMedian), double(pathSamples) / std::max<double>(1.0, double(pixels)), o.maxSpp);
     if (saturated > 0)
         std::fprintf(stderr,
                      "fluorosim: warning: %zu of %zu pixels expect more than the full well (%.3g e-; brightest %.3g e-): the camera saturates "

@@ -1,6 +1,7 @@
 #include "core/message.h"
 
 #include <cstdio>
+#include <sstream>
 
 namespace fluorosim {
 
@@ -27,6 +28,12 @@ std::string excerpt(std::string_view text, size_t maxChars) {
     }
     if (i < text.size()) out += "... (" + std::to_string(text.size()) + " characters)";
     return out;
+}
+
+std::string messageNumber(double v) {
+    std::ostringstream os;
+    os << v;
+    return os.str();
 }
 
 }  // namespace fluorosim

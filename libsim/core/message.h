@@ -13,4 +13,7 @@ inline constexpr size_t kExcerptChars = 80;
 // "..." and the full length, e.g. "aaaa... (52428800 characters)". Cuts never split a UTF-8 sequence.
 std::string excerpt(std::string_view text, size_t maxChars = kExcerptChars);
 
+// A number as a message shows it: 6 significant digits, no trailing zeros ("0.406", "1e-07").
+std::string messageNumber(double v);
+
 }  // namespace fluorosim

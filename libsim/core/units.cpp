@@ -16,11 +16,26 @@ std::string_view trim(std::string_view s) {
     return s;
 }
 
+// "u" for the micro sign (U+00B5) and the Greek mu (U+03BC), which look alike.
+std::string asciiMicro(std::string_view unit) {
+    std::string out;
+    for (size_t i = 0; i < unit.size(); ++i) {
+        const std::string_view rest = unit.substr(i);
+        if (rest.substr(0, 2) == "\xC2\xB5" || rest.substr(0, 2) == "\xCE\xBC") {
+            out += 'u';
+            ++i;
+        } else {
+            out += unit[i];
+        }
+    }
+    return out;
+}
+
 std::optional<double> lengthInMm(std::string_view u) {
     if (u == "m") return 1e3;
     if (u == "cm") return 10.0;
     if (u == "mm") return 1.0;
-    if (u == "um" || u == "µm" || u == "micron") return 1e-3;
+    if (u == "um" || u == "micron") return 1e-3;
     if (u == "nm") return 1e-6;
     return std::nullopt;
 }
@@ -36,17 +51,35 @@ const char* dimensionName(Dimension d) {
         case Dimension::MolarConcentration: return "a concentration (e.g. \"10 uM\")";
         case Dimension::MassConcentration: return "a mass concentration (e.g. \"0.1 g/L\")";
         case Dimension::MolarMass: return "a molar mass (e.g. \"643.4 g/mol\")";
+        case Dimension::Time: return "a time (e.g. \"50 ms\")";
+        case Dimension::Power: return "a power (e.g. \"3 mW\")";
     }
     return "?";
 }
 
-std::optional<double> unitScale(std::string_view unit, Dimension dim) {
-    unit = trim(unit);
+const char* acceptedUnits(Dimension d) {
+    switch (d) {
+        case Dimension::Length: return "m, cm, mm, um, nm";
+        case Dimension::InverseLength: return "/m, /cm, /mm, /um";
+        case Dimension::Wavelength: return "nm, um";
+        case Dimension::Dimensionless: return "none";
+        case Dimension::MolarConcentration: return "M, mM, uM, nM, pM";
+        case Dimension::MassConcentration: return "g/L, mg/mL, mg/L, ug/mL, ug/L";
+        case Dimension::MolarMass: return "g/mol, Da, kg/mol, kDa";
+        case Dimension::Time: return "s, ms, us, ns, min";
+        case Dimension::Power: return "W, mW, uW, nW";
+    }
+    return "?";
+}
+
+std::optional<double> unitScale(std::string_view text, Dimension dim) {
+    const std::string ascii = asciiMicro(trim(text));
+    const std::string_view unit = ascii;
     switch (dim) {
         case Dimension::Length: return lengthInMm(unit);
         case Dimension::Wavelength: {
             if (unit == "nm") return 1.0;
-            if (unit == "um" || unit == "µm") return 1e3;
+            if (unit == "um") return 1e3;
             return std::nullopt;
         }
         case Dimension::InverseLength: {
@@ -63,20 +96,35 @@ std::optional<double> unitScale(std::string_view unit, Dimension dim) {
         case Dimension::MolarConcentration: {
             if (unit == "M" || unit == "mol/L") return 1.0;
             if (unit == "mM" || unit == "mmol/L") return 1e-3;
-            if (unit == "uM" || unit == "µM" || unit == "umol/L") return 1e-6;
+            if (unit == "uM" || unit == "umol/L") return 1e-6;
             if (unit == "nM" || unit == "nmol/L") return 1e-9;
             if (unit == "pM") return 1e-12;
             return std::nullopt;
         }
         case Dimension::MassConcentration: {
             if (unit == "g/L" || unit == "mg/mL") return 1.0;
-            if (unit == "mg/L" || unit == "ug/mL" || unit == "µg/mL") return 1e-3;
-            if (unit == "ug/L" || unit == "µg/L") return 1e-6;
+            if (unit == "mg/L" || unit == "ug/mL") return 1e-3;
+            if (unit == "ug/L") return 1e-6;
             return std::nullopt;
         }
         case Dimension::MolarMass: {
             if (unit == "g/mol" || unit == "Da") return 1.0;
             if (unit == "kg/mol" || unit == "kDa") return 1e3;
+            return std::nullopt;
+        }
+        case Dimension::Time: {
+            if (unit == "s") return 1.0;
+            if (unit == "ms") return 1e-3;
+            if (unit == "us") return 1e-6;
+            if (unit == "ns") return 1e-9;
+            if (unit == "min") return 60.0;
+            return std::nullopt;
+        }
+        case Dimension::Power: {
+            if (unit == "W") return 1e3;
+            if (unit == "mW") return 1.0;
+            if (unit == "uW") return 1e-3;
+            if (unit == "nW") return 1e-6;
             return std::nullopt;
         }
     }
@@ -113,7 +161,7 @@ double parseQuantity(std::string_view text, Dimension dim, std::string_view what
         return scaled(*scale);
     }
     const auto scale = unitScale(unit, dim);
-    if (!scale) return fail("unknown or mismatched unit \"" + excerpt(unit) + "\"");
+    if (!scale) return fail("unknown or mismatched unit \"" + excerpt(unit) + "\" (units: " + acceptedUnits(dim) + ")");
     return scaled(*scale);
 }
 

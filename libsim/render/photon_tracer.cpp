@@ -82,11 +82,11 @@ public:
                     const MediumSample c = spec.at(mx);
                     return c.sigmaA + c.sigmaS;
                 });
-                sampleTmaj<SampledSpectrum>(majorants, rng, [&](double t, const SampledSpectrum& sigmaMaj, const SampledSpectrum&) {
-                    m.channelValues(ph.ray.at(t), ch.data());
+                sampleTmaj<SampledSpectrum>(majorants, rng, [&](double tCollision, const SampledSpectrum& sigmaMaj, const SampledSpectrum&) {
+                    m.channelValues(ph.ray.at(tCollision), ch.data());
                     const MediumSample c = spec.at(ch.data());
                     if (rng.uniform() * sigmaMaj[0] >= c.sigmaA[0] + c.sigmaS[0]) return true;  // null collision
-                    s = t;
+                    s = tCollision;
                     return false;
                 });
                 if (std::isfinite(s)) {

@@ -123,6 +123,16 @@ double SceneField::quantity(Dimension dim) const {
     }
 }
 
+double SceneField::quantity(Dimension dim, std::string_view bareUnit) const {
+    if (node(node_).is_number()) return number() * *unitScale(bareUnit, dim);
+    if (!isString()) fail(std::string("expected a number (in ") + std::string(bareUnit) + ") or a string with a unit, " + dimensionName(dim));
+    try {
+        return parseQuantity(str(), dim, "value", bareUnit);
+    } catch (const ConfigError& e) {
+        failQuoted(e.what());
+    }
+}
+
 double SceneField::positiveQuantity(Dimension dim) const {
     const double v = quantity(dim);
     if (!(v > 0)) fail("must be positive");

@@ -42,6 +42,9 @@ public:
     bool boolean() const;
     double quantity(Dimension dim) const;  // "0.5 mm" into internal units
     double positiveQuantity(Dimension dim) const;
+    // A bare number in the unit the field's name carries ("exposure_s": 0.05), or a string with any unit
+    // of the dimension ("50 ms").
+    double quantity(Dimension dim, std::string_view bareUnit) const;
     // ["1 mm", "2 mm", "3 mm"] or {"value": [1, 2, 3], "unit": "mm"}; dimensionless: [0, 1, 0].
     Vec3 vec3(Dimension dim) const;
 

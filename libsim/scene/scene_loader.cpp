@@ -205,6 +205,17 @@ public:
         if (!(v > 0)) fail("must be positive");
         return v;
     }
+    // A bare number in the unit the field's name carries ("power_mW": 3), or a string with any unit of
+    // the dimension ("3 mW", "0.5 W").
+    double quantity(Dimension dim, std::string_view bareUnit) const {
+        if (j_.is_number()) return number() * *unitScale(bareUnit, dim);
+        if (!j_.is_string()) fail(std::string("expected a number (in ") + std::string(bareUnit) + ") or a string with a unit, " + dimensionName(dim));
+        try {
+            return parseQuantity(j_.get<std::string>(), dim, "value", bareUnit);
+        } catch (const ConfigError& e) {
+            failQuoted(e.what());
+        }
+    }
     // ["1 mm", "2 mm", "3 mm"] or {"value": [1, 2, 3], "unit": "mm"}; dimensionless: [0, 1, 0].
     Vec3 vec3(Dimension dim) const {
         if (j_.is_object()) {
@@ -767,7 +778,8 @@ private:
         if (l.has("wavelength") == l.has("spectrum")) l.fail("give exactly one of \"wavelength\" and \"spectrum\"");
         if (l.has("wavelength")) spec.wavelengthNm = l.at("wavelength").positiveQuantity(Dimension::Wavelength);
         else spec.spectrum = spectrum(l.at("spectrum"), SpectrumKind::Emission);
-        spec.powerMw = l.at("power_mW").number(0, 1e6, true);
+        spec.powerMw = l.at("power_mW").quantity(Dimension::Power, "mW");
+        if (!(spec.powerMw > 0 && spec.powerMw <= 1e6)) l.at("power_mW").fail("must lie in (0, 1e6] mW");
     }
 
     // {"type": "light_sheet", "wavelength": "488 nm" (or "spectrum": ...), "power_mW": 10,

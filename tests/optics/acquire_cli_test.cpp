@@ -22,10 +22,15 @@ using namespace testing;
 
 const fs::path kBeads = fs::path(FLUOROSIM_SOURCE_DIR) / "samples" / "lightsheet" / "beads.json";
 
-// beads.json with absolute mesh paths, small, after `edit`.
+// beads.json with absolute mesh paths, small (16 x 16 pixels, with one more bead in the middle of the
+// field so that it holds one), after `edit`.
 fs::path beads(const TempDir& dir, const std::function<void(json&)>& edit = {}) {
     json j = json::parse(readFile(kBeads));
     j["shapes"][0]["file"] = (kBeads.parent_path() / "bath.obj").string();
+    json centre = j["shapes"][1];
+    centre["name"] = "centre bead";
+    centre["center"] = {"0.0004 mm", "-0.0003 mm", "0.0002 mm"};
+    j["shapes"].push_back(centre);
     j["microscope"]["detector"]["width"] = 16;
     j["microscope"]["detector"]["height"] = 16;
     if (edit) edit(j);
@@ -49,6 +54,137 @@ TEST(AcquireCli, WritesOmeTiffStacks) {
     const optics::TiffStackInfo expected = optics::readTiffStack(dir.path() / "stack.expected.ome.tif", false);
     EXPECT_EQ(expected.pages, 3);
     EXPECT_EQ(expected.sampleFormat, 3);
+}
+
+// Quantities take any unit of their kind where a bare number carries the field's own ("exposure_s",
+// "power_mW"): the same stack either way.
+TEST(AcquireCli, ExposureAndPowerAcceptUnits) {
+    TempDir dir;
+    auto expected = [&](const std::function<void(json&)>& edit, const std::string& name) {
+        const std::string out = (dir.path() / (name + ".ome.tif")).string();
+        const auto r = runCli(dir, {"acquire", beads(dir, edit).string(), "-o", out, "--spp", "1", "--planes", "1"});
+        EXPECT_EQ(r.exitCode, 0) << r.err;
+        return readFile(dir.path() / (name + ".expected.ome.tif")).size() > 0 ? json::parse(r.out)["max_expected_electrons"].get<double>() : -1.0;
+    };
+    const double bare = expected([](json& j) {
+        j["microscope"]["detector"]["exposure_s"] = 0.02;
+        j["lights"][0]["power_mW"] = 0.004;
+    }, "bare");
+    const double units = expected([](json& j) {
+        j["microscope"]["detector"]["exposure_s"] = "20 ms";
+        j["lights"][0]["power_mW"] = "4 \xCE\xBCW";
+    }, "units");
+    EXPECT_GT(bare, 0);
+    EXPECT_EQ(bare, units);
+    const std::string out = (dir.path() / "bad.ome.tif").string();
+    const auto r = runCli(dir, {"acquire", beads(dir, [](json& j) { j["microscope"]["detector"]["exposure_s"] = "20 mm"; }).string(), "-o", out});
+    EXPECT_EQ(r.exitCode, 2);
+    expectOneLineError(r, {"/microscope/detector/exposure_s", "20 mm", "units: s, ms, us, ns, min"});
+}
+
+// A channel is warned about only when it sees almost none of the dyes its own lasers excite, and only
+// when it is acquired: two channels that each block the other's dye say nothing.
+TEST(AcquireCli, FilterWarningsNameOnlyAChannelBlindToItsOwnDyes) {
+    TempDir dir;
+    auto run = [&](const std::string& redFilter, std::vector<std::string> extra) {
+        const fs::path scene = beads(dir, [&](json& j) {
+            j["media"]["red"] = json{{"ior", 1.33}, {"dyes", json::array({json{{"dye", "AF594"}, {"concentration", "100 uM"}}})}};
+            j["shapes"].push_back(json{{"type", "sphere"}, {"center", {"0 mm", "0 mm", "0 mm"}}, {"radius", "0.1 um"}, {"interior", "red"}, {"exterior", "water"}});
+            j["lights"].push_back(j["lights"][0]);
+            j["lights"][1]["wavelength"] = "561 nm";
+            j["microscope"]["channels"] = json::array({json{{"name", "green"}, {"emission_filter", "semrock_FF01-525-45"}, {"lights", {0}}},
+                                                       json{{"name", "red"}, {"emission_filter", redFilter}, {"lights", {1}}}});
+        });
+        std::vector<std::string> args{"acquire", scene.string(), "-o", (dir.path() / "s.ome.tif").string(), "--spp", "1", "--planes", "1"};
+        args.insert(args.end(), extra.begin(), extra.end());
+        return runCli(dir, args);
+    };
+    auto r = run("semrock_FF01-609-54", {});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_FALSE(contains(r.err, "emission")) << r.err;
+    r = run("semrock_FF01-525-45", {});  // the red channel behind the green filter: the real mistake
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_TRUE(contains(r.err, "warning: channel \"red\": its laser lines (561 nm) excite alexa_fluor_594 (47 % of its peak")) << r.err;
+    EXPECT_FALSE(contains(r.err, "channel \"green\"")) << r.err;
+    r = run("semrock_FF01-525-45", {"--channels", "green"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_FALSE(contains(r.err, "channel \"red\"")) << r.err;
+}
+
+// The objective's immersion index and the medium its rays cross must agree; a dry objective set over a
+// water-filled camera medium used to give a stack identical to the water objective's without a word.
+TEST(AcquireCli, AnImmersionIndexUnlikeTheCameraMediumIsWarnedAbout) {
+    TempDir dir;
+    const auto r = runCli(dir, {"acquire", beads(dir, [](json& j) { j["microscope"]["objective"]["immersion_index"] = 1.0; }).string(), "-o",
+                                (dir.path() / "s.ome.tif").string(), "--spp", "1", "--planes", "1"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_TRUE(contains(r.err, "warning: objective immersion_index 1 differs from the index 1.33 of the camera's medium \"water\"")) << r.err;
+}
+
+// Set-ups that would render for minutes an image that means nothing are caught before rendering, with
+// numbers: planes beyond the specimen (each of them, not only plane 0), a sheet off the focal plane or far
+// thicker than the depth of field, seconds that were meant as milliseconds, camera rays that start in
+// tissue, and (refused) in a scattering medium that nothing bounds.
+TEST(AcquireCli, SetUpMistakesAreCaughtBeforeRendering) {
+    TempDir dir;
+    const std::string out = (dir.path() / "s.ome.tif").string();
+    auto run = [&](const std::function<void(json&)>& edit, std::vector<std::string> extra = {"--planes", "1"}) {
+        std::vector<std::string> args{"acquire", beads(dir, edit).string(), "-o", out, "--spp", "1"};
+        args.insert(args.end(), extra.begin(), extra.end());
+        return runCli(dir, args);
+    };
+    auto wide = [](json& j) { j["microscope"]["detector"]["width"] = j["microscope"]["detector"]["height"] = 64; };
+    auto r = run(wide);
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_FALSE(contains(r.err, "warning")) << r.err;
+    // 6 planes 5 um apart over beads within 3 um of the focus: only the middle two planes meet them.
+    r = run(wide, {"--planes", "6", "--step", "5um"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_TRUE(contains(r.err, "warning: planes 0-1 (-12.5 um to -7.5 um from the focus): the field of view (26 um x 26 um) meets no dyed shape"))
+        << r.err;
+    EXPECT_TRUE(contains(r.err, "warning: planes 4-5 (7.5 um to 12.5 um from the focus)")) << r.err;
+    EXPECT_FALSE(contains(r.err, "plane 2")) << r.err;
+    r = run([&](json& j) {
+        wide(j);
+        j["lights"][0]["waist"] = "3 mm";
+    });
+    EXPECT_TRUE(contains(r.err, "light 0's waist 3000 um is")) << r.err;
+    EXPECT_TRUE(contains(r.err, "times the objective's depth of field")) << r.err;
+    r = run([&](json& j) {
+        wide(j);
+        j["lights"][0]["center"] = {"0 mm", "0 mm", "0.05 mm"};
+    });
+    EXPECT_TRUE(contains(r.err, "the focal plane lies 50 um from the centre plane of light 0 (waist 1.5 um)")) << r.err;
+    r = run([&](json& j) {
+        wide(j);
+        j["microscope"]["detector"]["exposure_s"] = 20;
+        j["lights"][0]["power_mW"] = "5 nW";
+    });
+    EXPECT_TRUE(contains(r.err, "exposure 20 s is long for one plane")) << r.err;
+    r = run([&](json& j) {
+        wide(j);
+        j["media"]["water"]["sigma_s"] = "1 /mm";
+    });
+    EXPECT_TRUE(contains(r.err, "the objective's front (working distance 200 um above plane 0) lies inside the scattering medium \"water\"")) << r.err;
+    // An adaptive run that stops at its path limit says how far from its noise target it stayed.
+    r = run(
+        [&](json& j) {  // one 3 um bead fills the field; every pixel's image a Monte Carlo estimate
+            json bead = j["shapes"][1];
+            bead["center"] = {"0 mm", "0 mm", "0 mm"};
+            bead["radius"] = "3 um";
+            j["shapes"] = json::array({j["shapes"][0], bead});
+            j["media"]["bead"]["dyes"][0]["concentration"] = "10 uM";
+        },
+        {"--planes", "1", "--estimator", "path", "--noise-ratio", "0.01", "--max-spp", "2"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_TRUE(contains(r.err, "warning: noise target 0.01 missed: the Monte Carlo error over the camera's noise is")) << r.err;
+    EXPECT_TRUE(contains(r.err, "paths per pixel on average (--max-spp 2)")) << r.err;
+    r = run([&](json& j) {
+        j["media"]["water"]["sigma_s"] = "1 /mm";
+        j["shapes"].erase(0);  // no bath: the scattering camera medium fills space
+    });
+    EXPECT_EQ(r.exitCode, 2) << r.err;
+    expectOneLineError(r, {"lies in the scattering medium \"water\" and no surface bounds it"});
 }
 
 TEST(AcquireCli, BadMicroscopeInputIsRejected) {

@@ -56,6 +56,36 @@ TEST(Units, WavelengthsInNanometres) {
     EXPECT_DOUBLE_EQ(parseQuantity("1 µm", Dimension::Wavelength, "x"), 1000.0);
 }
 
+TEST(Units, MicroMayBeWrittenWithTheGreekMu) {
+    // U+03BC (Greek mu), which keyboards and papers give as often as U+00B5 (micro sign).
+    EXPECT_DOUBLE_EQ(parseQuantity("5 \xCE\xBCm", Dimension::Length, "x"), 5e-3);
+    EXPECT_DOUBLE_EQ(parseQuantity("5 \xC2\xB5m", Dimension::Length, "x"), 5e-3);
+    EXPECT_DOUBLE_EQ(parseQuantity("10 \xCE\xBCM", Dimension::MolarConcentration, "x"), 1e-5);
+    EXPECT_DOUBLE_EQ(parseQuantity("0.5 \xCE\xBCm", Dimension::Wavelength, "x"), 500.0);
+}
+
+TEST(Units, TimesInSecondsAndPowersInMilliwatts) {
+    EXPECT_DOUBLE_EQ(parseQuantity("50 ms", Dimension::Time, "x"), 0.05);
+    EXPECT_DOUBLE_EQ(parseQuantity("2 s", Dimension::Time, "x"), 2.0);
+    EXPECT_DOUBLE_EQ(parseQuantity("100 us", Dimension::Time, "x"), 1e-4);
+    EXPECT_DOUBLE_EQ(parseQuantity("1 min", Dimension::Time, "x"), 60.0);
+    EXPECT_DOUBLE_EQ(parseQuantity("3 mW", Dimension::Power, "x"), 3.0);
+    EXPECT_DOUBLE_EQ(parseQuantity("0.5 W", Dimension::Power, "x"), 500.0);
+    EXPECT_DOUBLE_EQ(parseQuantity("20 \xCE\xBCW", Dimension::Power, "x"), 0.02);
+    EXPECT_DOUBLE_EQ(parseQuantity("0.05", Dimension::Time, "exposure_s", "s"), 0.05);
+    expectRejected("50 mm", Dimension::Time);
+    expectRejected("3 mJ", Dimension::Power);
+}
+
+TEST(Units, AnUnknownUnitListsTheAcceptedOnes) {
+    try {
+        parseQuantity("5 uu", Dimension::Length, "x");
+        ADD_FAILURE() << "accepted";
+    } catch (const ConfigError& e) {
+        EXPECT_NE(std::string(e.what()).find("units: m, cm, mm, um, nm"), std::string::npos) << e.what();
+    }
+}
+
 TEST(Units, BareNumbersUseTheBareUnit) {
     EXPECT_DOUBLE_EQ(parseQuantity("0.02", Dimension::Length, "--thickness", "cm"), 0.2);
     EXPECT_DOUBLE_EQ(parseQuantity("90", Dimension::InverseLength, "--mua", "/cm"), 9.0);
