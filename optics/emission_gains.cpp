@@ -99,6 +99,7 @@ EmissionGains::EmissionGains(const Scene& scene, const EmissionLattice& lattice,
     const int slots = lattice.slots();
 
     auto beamTransmittance = [&](const Vec3& p, int medium, const LineSide& side) {
+        if (!o.attenuation) return 1.0;
         const Vec3 back = -side.profile->direction(side.side);
         const StraightLine line =
             traceStraightLine(scene, Ray{p, back}, medium, 0.0, 2 * (scene.geometry.extent() + length(p)) + 1, LineSurfaces::UntilRefraction);
@@ -114,6 +115,7 @@ EmissionGains::EmissionGains(const Scene& scene, const EmissionLattice& lattice,
     // The mean over the cone of the transmittance from p (in `medium`) to the objective's front plane of the
     // reference plane: straight in each medium, bent and Fresnel-weighted at each refracting surface.
     auto cameraTransmittance = [&](const Vec3& p, int medium) {
+        if (!o.attenuation) return SampledSpectrum(1.0);
         SampledSpectrum sum(0.0);
         for (size_t r = 0; r < rings.nodes.size(); ++r) {
             const double cosT = 1 - rings.nodes[r] * (1 - reference.cosMax());
@@ -132,7 +134,7 @@ EmissionGains::EmissionGains(const Scene& scene, const EmissionLattice& lattice,
         coneCos_.push_back(bend == 1 ? cosT : std::sqrt(std::max(0.0, 1 - bend * bend * (1 - cosT * cosT))));
         coneWeight_.push_back(rings.weights[r]);
     }
-    if (scene.camera.medium != kNone && scene.media[static_cast<size_t>(scene.camera.medium)].isHomogeneous()) {
+    if (o.attenuation && scene.camera.medium != kNone && scene.media[static_cast<size_t>(scene.camera.medium)].isHomogeneous()) {
         const Medium& cam = scene.media[static_cast<size_t>(scene.camera.medium)];
         for (int j = 0; j < kNumWavelengths; ++j)
             cameraExtinction_[static_cast<size_t>(j)] = cam.absorptionAt(dyes.cameraLambda[static_cast<size_t>(j)]) +

@@ -24,6 +24,7 @@ struct TransmittanceOptions {
     double stepUm = 2;            // the coarse lattice of grid media's transmittances, trilinearly interpolated
     double quadratureVoxels = 4;  // midpoint step along rays through grid media, in voxels
     int coneRings = 3, coneAzimuths = 4;  // the cone mean: Gauss–Legendre in cos θ, uniform in azimuth
+    bool attenuation = true;              // false: every transmittance is 1 (a perfect microscope)
 };
 
 // One side of one beam line of a plane's lights.

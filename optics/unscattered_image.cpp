@@ -119,7 +119,7 @@ struct UnscatteredModel::Impl {
     mutable std::unique_ptr<EmissionGains> gains;
 
     TransmittanceOptions transmittanceOptions() const {
-        return {o.transmittanceStepUm, o.transmittanceQuadratureVoxels, o.coneRings, o.coneAzimuths};
+        return {o.transmittanceStepUm, o.transmittanceQuadratureVoxels, o.coneRings, o.coneAzimuths, o.attenuation};
     }
 };
 

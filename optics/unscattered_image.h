@@ -48,6 +48,9 @@ struct UnscatteredOptions {
     // Dyes whose photoelectrons per mol/L in the channel fall below this fraction of its most efficient
     // dye's are left out of the computed image (and, covered by it, of the paths' core emission too).
     double dropDyesBelow = 1e-5;
+    // False: every transmittance is 1 (no attenuation by the media or the dyes), the image of a perfect
+    // microscope with this objective and sheet (the ground truth, optics/ground_truth.h).
+    bool attenuation = true;
     void validate() const;              // ConfigError naming the option and value
 };
 

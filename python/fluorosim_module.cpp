@@ -17,12 +17,15 @@
 #include "database.h"
 #include "optics/acquisition.h"
 #include "optics/concentration_fit.h"
+#include "optics/ground_truth.h"
 #include "optics/observed_stack.h"
 #include "optics/stack_files.h"
 #include "render/fluorescence.h"
 #include "render/renderer.h"
+#include "volume/density_grid.h"
 #include "optics/acquire_request.h"
 #include "optics/scene_files.h"
+#include "optics/setup_checks.h"
 #include "optics/voxelize_request.h"
 
 namespace py = pybind11;
@@ -98,6 +101,28 @@ py::dict renderScene(const py::object& sceneArg, std::optional<int> spp, std::op
     return out;
 }
 
+// Library warnings as Python warnings (UserWarning), so that filters and pytest see them.
+void warnAll(const std::vector<std::string>& messages) {
+    for (const std::string& w : messages)
+        if (PyErr_WarnEx(PyExc_UserWarning, w.c_str(), 1) != 0) throw py::error_already_set();
+}
+
+// Where a stack's pixels and planes lie in the scene: axes, world positions of the first pixel's centre
+// and the unit steps of x (columns), y (rows) and z (planes), in µm.
+void addGeometry(py::dict& out, const optics::Microscope& m) {
+    const Vec3 origin = optics::pixelCentreMm(m, 0, 0, 0);
+    const Vec3 dx = optics::pixelCentreMm(m, 0, 1, 0) - origin, dy = optics::pixelCentreMm(m, 0, 0, 1) - origin;
+    const Vec3 dz = m.stack.planes > 1 ? optics::pixelCentreMm(m, 1, 0, 0) - origin : normalize(m.focus.towardObjective) * m.stack.stepMm;
+    auto um = [](const Vec3& v) { return std::vector<double>{v.x * 1e3, v.y * 1e3, v.z * 1e3}; };
+    out["axes"] = "CZYX";
+    out["origin_um"] = um(origin);
+    out["x_step_um"] = um(dx);
+    out["y_step_um"] = um(dy);
+    out["z_step_vector_um"] = um(dz);
+    out["pixel_size_um"] = m.pixelSizeMm() * 1e3;
+    out["z_step_um"] = m.stack.stepMm * 1e3;
+}
+
 py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, const std::optional<std::string>& step, std::optional<int> spp,
                  std::optional<int64_t> seed, const std::vector<std::string>& channels, int threads, const std::optional<std::string>& base,
                  const std::string& estimator, std::optional<int> directSpp, std::optional<double> noiseRatio, std::optional<int> maxSpp) {
@@ -118,6 +143,10 @@ py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, con
     optics::Microscope m = optics::Microscope::fromScene(scene, database());
     const optics::AcquireOptions o = optics::applyAcquireRequest(request, scene, m);
     const std::vector<size_t> selected = m.selectChannels(channels, "--channels");
+    warnAll(scene.warnings);
+    warnAll(m.warnings);
+    for (size_t c : selected) warnAll(m.channels[c].warnings);
+    warnAll(optics::checkSetup(scene, m, selected));
     optics::Stack stack = optics::emptyStack(m, selected);
     {
         py::gil_scoped_release release;
@@ -131,11 +160,45 @@ py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, con
     py::list names;
     for (size_t c : stack.channels) names.append(m.channels[c].name);
     out["channels"] = names;
-    out["pixel_size_um"] = m.pixelSizeMm() * 1e3;
-    out["z_step_um"] = m.stack.stepMm * 1e3;
+    addGeometry(out, m);
     out["spp"] = o.spp;
     out["seed"] = o.seed;
     out["estimator"] = optics::estimatorName(o.estimator);
+    return out;
+}
+
+// The ground truth on the stack's grid: concentrations per dye and the perfect microscope's image.
+py::dict groundTruthOf(const py::object& sceneArg, std::optional<int> planes, const std::optional<std::string>& step,
+                       const std::vector<std::string>& channels, int threads, const std::optional<std::string>& base) {
+    optics::AcquireRequest request;
+    request.planes = planes;
+    request.step = step;
+    request.threads = threads;
+    optics::checkAcquireRequest(request);
+    const Scene scene = loadAnyScene(sceneArg, base);
+    optics::Microscope m = optics::Microscope::fromScene(scene, database());
+    const optics::AcquireOptions o = optics::applyAcquireRequest(request, scene, m);
+    const std::vector<size_t> selected = m.selectChannels(channels, "channels");
+    optics::GroundTruth truth;
+    {
+        py::gil_scoped_release release;
+        truth = optics::groundTruth(scene, m, selected, o);
+    }
+    const py::ssize_t z = truth.planes, y = truth.height, x = truth.width;
+    const size_t stackPixels = static_cast<size_t>(z * y * x);
+    py::dict concentration;
+    for (size_t d = 0; d < truth.dyes.size(); ++d)
+        concentration[py::str(truth.dyes[d])] =
+            toArray(std::vector<float>(truth.concentration.begin() + static_cast<std::ptrdiff_t>(d * stackPixels),
+                                       truth.concentration.begin() + static_cast<std::ptrdiff_t>((d + 1) * stackPixels)),
+                    {z, y, x});
+    py::dict out;
+    out["concentration"] = concentration;  // per dye id, (z, y, x), mol/L
+    out["ideal"] = toArray(truth.ideal, {static_cast<py::ssize_t>(selected.size()), z, y, x});
+    py::list names;
+    for (size_t c : selected) names.append(m.channels[c].name);
+    out["channels"] = names;
+    addGeometry(out, m);
     return out;
 }
 
@@ -172,6 +235,63 @@ py::array_t<double> filterTransmission(const std::string& name, const std::vecto
     std::vector<double> values;
     for (double x : l) values.push_back(t(x));
     return toArray(values, {static_cast<py::ssize_t>(l.size())});
+}
+
+// NumPy arrays (z, y, x) into an OpenVDB file a scene's "volume" can name: one float grid per entry of
+// `grids` (concentrations in `units`), and an optional Int32 label grid. Voxel (i, j, k) = array[k, j, i]
+// has its centre at origin + (i, j, k) × voxel, so array[0, 0, 0] lies at `origin`.
+py::dict writeVolume(const std::string& path, const py::dict& grids, const std::string& voxel, const std::vector<std::string>& origin,
+                     const std::string& units, const std::optional<py::array_t<int32_t, py::array::c_style | py::array::forcecast>>& labels,
+                     const std::string& labelName) {
+    const double voxelMm = parseQuantity(voxel, Dimension::Length, "voxel");
+    if (!(voxelMm > 0)) throw ConfigError("voxel: must be positive, got " + voxel);
+    if (origin.size() != 3) throw ConfigError("origin: expected three lengths, e.g. [\"0 um\", \"0 um\", \"0 um\"]");
+    const Vec3 o(parseQuantity(origin[0], Dimension::Length, "origin[0]"), parseQuantity(origin[1], Dimension::Length, "origin[1]"),
+                 parseQuantity(origin[2], Dimension::Length, "origin[2]"));
+    if (!unitScale(units, Dimension::MolarConcentration)) throw ConfigError("units: expected a molar concentration unit (M, mM, uM, nM, pM), got \"" + units + "\"");
+    if (grids.empty()) throw ConfigError("grids: expected at least one {name: array (z, y, x)}");
+    const Affine worldFromIndex = Affine::scaling(voxelMm).then(Affine::translation(o));
+    std::vector<DensityGrid> made;
+    std::vector<std::string> names;
+    std::array<py::ssize_t, 3> shape{};
+    auto boxOf = [&](const std::array<py::ssize_t, 3>& zyx) {
+        IndexBox b;
+        b.hi = {static_cast<int32_t>(zyx[2] - 1), static_cast<int32_t>(zyx[1] - 1), static_cast<int32_t>(zyx[0] - 1)};
+        return b;
+    };
+    for (const auto& [key, value] : grids) {
+        const std::string name = py::str(key);
+        const auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(value);
+        if (!a || a.ndim() != 3) throw ConfigError("grids[\"" + name + "\"]: expected a 3-D array (z, y, x)");
+        const std::array<py::ssize_t, 3> s{a.shape(0), a.shape(1), a.shape(2)};
+        if (names.empty()) shape = s;
+        else if (s != shape) throw ConfigError("grids[\"" + name + "\"]: shape differs from the first grid's");
+        const double* data = a.data();
+        for (py::ssize_t i = 0; i < a.size(); ++i)
+            if (!(data[i] >= 0) || !std::isfinite(data[i]))
+                throw ConfigError("grids[\"" + name + "\"]: values must be finite and >= 0, got " + std::to_string(data[i]) + " at flat index " + std::to_string(i));
+        made.push_back(DensityGrid::fromVoxels(
+            name, boxOf(s), worldFromIndex, [&](int i, int j, int k) { return data[(static_cast<size_t>(k) * s[1] + j) * s[2] + i]; }, GridMetadata{units, "mm"}));
+        names.push_back(name);
+    }
+    if (labels) {
+        const auto& l = *labels;
+        if (l.ndim() != 3 || l.shape(0) != shape[0] || l.shape(1) != shape[1] || l.shape(2) != shape[2])
+            throw ConfigError("labels: expected an integer array of the grids' shape (z, y, x)");
+        const int32_t* data = l.data();
+        made.push_back(DensityGrid::fromVoxels(labelName, boxOf(shape), worldFromIndex,
+                                               [&](int i, int j, int k) { return data[(static_cast<size_t>(k) * shape[1] + j) * shape[2] + i]; },
+                                               GridMetadata{"", "mm"}));
+        names.push_back(labelName);
+    }
+    std::vector<GridToWrite> out;
+    for (size_t g = 0; g < made.size(); ++g) out.push_back({names[g], &made[g], labels && g + 1 == made.size()});
+    writeDensityGrids(path, out);
+    py::dict result;
+    result["output"] = path;
+    result["grids"] = names;
+    result["voxel_size_um"] = voxelMm * 1e3;
+    return result;
 }
 
 // `fluorosim voxelize` from Python: the same checks and messages, the grids written to `output`.
@@ -426,6 +546,19 @@ PYBIND11_MODULE(fluorosim, mod) {
             "Acquire a light-sheet z-stack of a scene with a microscope block. Returns a dict: counts (uint16), expected and "
             "stderr (float32), each (channel, z, y, x); channels, pixel_size_um, z_step_um, spp, seed. Same numbers as "
             "`fluorosim acquire` with the same options (estimator: split or path; noise_ratio and max_spp: adaptive sampling).");
+    mod.def("ground_truth", &groundTruthOf, py::arg("scene"), py::kw_only(), py::arg("planes") = py::none(), py::arg("step") = py::none(),
+            py::arg("channels") = std::vector<std::string>{}, py::arg("threads") = 0, py::arg("base") = py::none(),
+            "The ground truth of the scene's stack on the detector grid: {'concentration': {dye id: (z, y, x) mol/L at the pixel "
+            "centres}, 'ideal': (channel, z, y, x) expected photoelectrons of a perfect microscope (no attenuation, no scattered "
+            "light, no dark current, no noise), 'channels', and the stack's geometry: 'axes' 'CZYX', 'origin_um' (the first "
+            "pixel's centre), 'x_step_um', 'y_step_um', 'z_step_vector_um' (world vectors of one column, row and plane), "
+            "'pixel_size_um', 'z_step_um'}.");
+    mod.def("write_volume", &writeVolume, py::arg("path"), py::arg("grids"), py::kw_only(), py::arg("voxel"),
+            py::arg("origin") = std::vector<std::string>{"0 um", "0 um", "0 um"}, py::arg("units") = "uM", py::arg("labels") = py::none(),
+            py::arg("label_grid") = "label",
+            "Writes NumPy concentration arrays (z, y, x) into an OpenVDB file for a scene's \"volume\": grids = {name: array} in "
+            "`units` (a molar unit), voxel = its edge with a unit, origin = the centre of array[0, 0, 0] as three lengths; labels = "
+            "an optional integer array of the same shape (neuron ids, 0 for none), written as `label_grid`.");
     mod.def("voxelize", &voxelizeSwc, py::arg("swc"), py::kw_only(), py::arg("voxel"), py::arg("dyes"), py::arg("concentrations"),
             py::arg("output"), py::arg("grids") = std::vector<std::string>{}, py::arg("mode") = "filled",
             py::arg("membrane_thickness") = py::none(), py::arg("supersampling") = 4, py::arg("threads") = 0,

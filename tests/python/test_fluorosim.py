@@ -274,3 +274,65 @@ def test_gradient_columns_match_the_cli(tmp_path):
         cli_columns = f.asarray().reshape(g["columns"].shape)
     np.testing.assert_array_equal(cli_columns, g["columns"])
     assert (g["columns"] >= -1e-6 * g["columns"].max()).all()
+
+
+def test_ground_truth_beside_the_acquired_stack():
+    """The perfect microscope's image and the concentration on the stack's grid, with the geometry that
+    places each pixel in the scene: a bead put at a pixel centre is found there, and the perfect image is
+    brightest on it; the acquired stack (through 200 um of water) is no brighter than the perfect one."""
+    scene = beads(width=32)
+    bead = copy.deepcopy(scene["shapes"][1])
+    pixel = 6.5 / 16
+    x, y = 20, 9  # column and row of the bead
+    centre = [(x + 0.5 - 16) * pixel, (16 - y - 0.5) * pixel, 0.0]
+    bead["center"] = [f"{c} um" for c in centre]
+    bead["radius"] = "0.15 um"
+    scene["shapes"] = [scene["shapes"][0], bead]
+    truth = fluorosim.ground_truth(scene, planes=3, step="1um")
+    assert truth["axes"] == "CZYX"
+    assert truth["ideal"].shape == (1, 3, 32, 32)
+    assert list(truth["concentration"]) == ["alexa_fluor_488"]
+    c = truth["concentration"]["alexa_fluor_488"]
+    assert c.shape == (3, 32, 32)
+    assert c[1, y, x] == pytest.approx(1e-3, rel=1e-6)  # the bead's 1 mM, in mol/L, at its pixel of the middle plane
+    assert np.count_nonzero(c) == 1
+    origin = np.array(truth["origin_um"])
+    found = origin + x * np.array(truth["x_step_um"]) + y * np.array(truth["y_step_um"]) + 1 * np.array(truth["z_step_vector_um"])
+    np.testing.assert_allclose(found, centre, atol=1e-9)
+    ideal = truth["ideal"][0, 1]
+    assert np.unravel_index(np.argmax(ideal), ideal.shape) == (y, x)
+    stack = fluorosim.acquire(scene, planes=3, step="1um", spp=4)
+    assert stack["origin_um"] == truth["origin_um"]
+    dark = 0.5 * 0.01
+    assert (stack["expected"][0, 1] - dark).sum() <= ideal.sum() * 1.001
+
+
+def test_library_warnings_reach_python():
+    scene = beads()
+    scene["microscope"]["detector"]["exposure_s"] = 20
+    scene["lights"][0]["power_mW"] = "1 nW"
+    with pytest.warns(UserWarning, match="exposure 20 s is long for one plane"):
+        fluorosim.acquire(scene, planes=1, spp=1)
+
+
+def test_numpy_concentrations_in_ground_truth_out(tmp_path):
+    """A NumPy concentration array becomes a scene's volume without writing OpenVDB by hand, and the
+    ground truth reads it back at the pixel centres: voxels the size of a pixel, centred on them."""
+    rng = np.random.default_rng(4)
+    c = rng.uniform(0, 20, size=(5, 16, 16))  # uM, (z, y, x)
+    pixel = 6.5 / 16
+    # array[k, j, i] at origin + (i, j, k) voxels; pixel (x, y) of plane 0 at ((x + 0.5 - 8) p, (8 - y - 0.5) p, 0):
+    # rows run down the image, so the array's y axis is flipped.
+    origin = [f"{(0.5 - 8) * pixel} um", f"{(0.5 - 8) * pixel} um", f"{-2 * pixel} um"]
+    written = fluorosim.write_volume(str(tmp_path / "v.vdb"), {"AF488": c}, voxel=f"{pixel} um", origin=origin, units="uM")
+    assert written["grids"] == ["AF488"]
+    scene = beads()
+    scene["shapes"] = [scene["shapes"][0]]
+    scene["media"]["water"]["dyes"] = [{"dye": "AF488", "grid": "AF488"}]
+    scene["media"]["water"]["volume"] = {"file": str(tmp_path / "v.vdb"), "interpolation": "trilinear"}
+    truth = fluorosim.ground_truth(scene, planes=1)
+    got = truth["concentration"]["alexa_fluor_488"][0]
+    np.testing.assert_allclose(got, c[2, ::-1, :] * 1e-6, rtol=1e-5)
+    assert truth["ideal"][0, 0].max() > 0
+    with pytest.raises(ValueError, match="values must be finite and >= 0"):
+        fluorosim.write_volume(str(tmp_path / "bad.vdb"), {"AF488": -c}, voxel="1 um")
