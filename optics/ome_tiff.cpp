@@ -54,6 +54,14 @@ std::string xmlEscape(const std::string& s) {
 
 std::string attr(const char* name, const std::string& value) { return std::string(" ") + name + "=\"" + xmlEscape(value) + "\""; }
 std::string attr(const char* name, double value) { return attr(name, num(value)); }
+
+// A physical size as it was meant: 12 significant digits drop the last bits of arithmetic
+// (6.5 um / 16 = 0.40625, not 0.40625000000000006); readers compare sizes to 1e-6.
+std::string measured(const char* name, double value) {
+    char buf[64];
+    const auto [end, ec] = std::to_chars(buf, buf + sizeof buf, value, std::chars_format::general, 12);
+    return attr(name, ec == std::errc() ? std::string(buf, end) : num(value));
+}
 std::string attr(const char* name, long long value) { return attr(name, std::to_string(value)); }
 
 // libtiff reports through handlers; these collect the messages for the exception instead of the
@@ -263,8 +271,8 @@ std::string omeXml(int width, int height, int planes, int channels, const std::s
     x += attr("SizeX", static_cast<long long>(width)) + attr("SizeY", static_cast<long long>(height)) +
          attr("SizeZ", static_cast<long long>(planes)) + attr("SizeC", static_cast<long long>(channels)) +
          attr("SizeT", static_cast<long long>(meta.timePoints));
-    x += attr("PhysicalSizeX", meta.pixelSizeUm) + attr("PhysicalSizeXUnit", um) + attr("PhysicalSizeY", meta.pixelSizeUm) +
-         attr("PhysicalSizeYUnit", um) + attr("PhysicalSizeZ", meta.zStepUm) + attr("PhysicalSizeZUnit", um) + ">\n";
+    x += measured("PhysicalSizeX", meta.pixelSizeUm) + attr("PhysicalSizeXUnit", um) + measured("PhysicalSizeY", meta.pixelSizeUm) +
+         attr("PhysicalSizeYUnit", um) + measured("PhysicalSizeZ", meta.zStepUm) + attr("PhysicalSizeZUnit", um) + ">\n";
     // Schema order inside Pixels: Channel*, then TiffData*, then Plane*.
     for (int c = 0; c < channels; ++c) {
         const ChannelInfo& ch = meta.channels.at(static_cast<size_t>(c));

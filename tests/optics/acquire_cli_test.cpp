@@ -50,6 +50,8 @@ TEST(AcquireCli, WritesOmeTiffStacks) {
     EXPECT_EQ(stack.width, 16);
     EXPECT_EQ(stack.bitsPerSample, 16);
     EXPECT_TRUE(contains(stack.imageDescription, "PhysicalSizeZ=\"1\"")) << stack.imageDescription.substr(0, 600);
+    // 6.5 um / 16 as it was meant, not 0.40625000000000006.
+    EXPECT_TRUE(contains(stack.imageDescription, "PhysicalSizeX=\"0.40625\"")) << stack.imageDescription.substr(0, 600);
     EXPECT_TRUE(contains(stack.imageDescription, "ExcitationWavelength=\"488\"")) << stack.imageDescription.substr(0, 600);
     const optics::TiffStackInfo expected = optics::readTiffStack(dir.path() / "stack.expected.ome.tif", false);
     EXPECT_EQ(expected.pages, 3);

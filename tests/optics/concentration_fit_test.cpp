@@ -537,12 +537,13 @@ TEST(ConcentrationFit, ModelMismatchBiasesAreReported) {
     ASSERT_TRUE(optics::acquireStack(truth.scene, truth.microscope, stack, a));
     struct Case {
         const char* name;
-        double sigmaS, gain;
+        double sigmaS, gain, index;
     };
-    for (const Case& c : {Case{"matched model", 2, 1}, Case{"tissue sigma_s -20 %", 1.6, 1}, Case{"tissue sigma_s +20 %", 2.4, 1},
-                          Case{"camera gain +5 %", 2, 1.05}}) {
+    for (const Case& c : {Case{"matched model", 2, 1, 1.33}, Case{"tissue sigma_s -20 %", 1.6, 1, 1.33}, Case{"tissue sigma_s +20 %", 2.4, 1, 1.33},
+                          Case{"camera gain +5 %", 2, 1.05, 1.33}, Case{"tissue index +0.02", 2, 1, 1.35}}) {
         testing::FitSceneOptions templateOptions;
         templateOptions.sigmaSPerMm = c.sigmaS;
+        templateOptions.tissueIndex = c.index;
         templateOptions.power488mW = templateOptions.power561mW = 0.002;
         FitSetup s(templateOptions);
         optics::FitData d;

@@ -15,6 +15,7 @@
 #include "materials/fresnel.h"
 #include "optics/acquisition.h"
 #include "optics/light_sheet.h"
+#include "support/dye_layer.h"
 #include "support/fluorescent_scenes.h"
 
 namespace fluorosim {
@@ -93,22 +94,9 @@ TEST_P(MismatchedLayer, KeepsThePhotonBudgetWithTheSampleConeAndFresnel) {
     band.fwhmNm = 60;
     const optics::Filter filter = optics::Filter::bandPass(band);
 
-    constexpr double hc = 1.98644586e-16;  // J nm
-    const double sigmaX = dyeAbsorption(dye, 488.0, molar);
-    double spectral = 0;  // ∫ f T QE dλ
-    for (double l = 450; l < 750; l += 0.05) spectral += dye.emissionPdf(l + 0.025) * filter.transmission(l + 0.025) * 0.8 * 0.05;
     const double collection = collectionFraction(sampleIndex, objective.na);
-    const double pixelMm = 6.5e-3 / 16;
     const int size = 12;
-    double expected = 0;
-    for (int y = 0; y < size; ++y)
-        for (int x = 0; x < size; ++x) {
-            const Vec3 p((x + 0.5 - 0.5 * size) * pixelMm, (0.5 * size - y - 0.5) * pixelMm, 0);
-            double e = 0;
-            for (int k = 0; k < 200; ++k) e += sheet->irradiance(p + Vec3(0, 0, -d / 2 + (k + 0.5) * d / 200), 0, 488.0) / 200;
-            e *= std::exp(-sigmaX * (p.x + half));
-            expected += sigmaX * d * e / (hc / 488.0) * dye.quantumYield() * collection * spectral * pixelMm * pixelMm * detector.exposureS;
-        }
+    double expected = layerElectrons(DyeLayer{dye, molar, d, half}, *sheet, 488.0, filter, LayerCamera{6.5e-3 / 16, size, 0.01, 0.8, collection}, true);
     // The model PSF is cut at vCut; what the aberrated PSF holds within it (the layer is uniform, so only the
     // cut is missing from the field) is the model's own Parseval-normalised table (widefield_psf_test).
     optics::AcquireOptions o;

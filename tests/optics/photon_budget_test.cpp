@@ -17,6 +17,7 @@
 
 #include "optics/acquisition.h"
 #include "optics/light_sheet.h"
+#include "support/dye_layer.h"
 #include "support/fluorescent_scenes.h"
 
 namespace fluorosim {
@@ -63,29 +64,13 @@ TEST(PhotonBudget, ThinDyeLayerUnderKnownSheetMatchesTheClosedFormChain) {
     o.psf.vCut = 60;  // a small field: the PSF cut (what it leaves out enters the closed form below) sets the margin
     const optics::PlaneImage r = optics::renderPlane(scene, objective, optics::FocalPlane{}, filter, detector, 16, 16, o);
 
-    // Closed form per pixel centre.
-    constexpr double hc = 1.98644586e-16;  // J nm
-    const double sigmaX = dyeAbsorption(dye, 488.0, molar);
-    double spectral = 0;  // ∫ f T QE dλ
-    for (double l = 450; l < 750; l += 0.05) spectral += dye.emissionPdf(l + 0.025) * filter.transmission(l + 0.025) * 0.8 * 0.05;
-    const double cosMax = std::cos(objective.collectionHalfAngle());
-    const double collection = 2 * kPi * (1 - cosMax) / (4 * kPi);
-    const double pixelMm = 6.5e-3 / 16;
-    double expected = 0, measured = 0, var = 0;
-    for (int y = 0; y < r.height; ++y)
-        for (int x = 0; x < r.width; ++x) {
-            const Vec3 p((x + 0.5 - 0.5 * r.width) * pixelMm, (0.5 * r.height - y - 0.5) * pixelMm, 0);
-            // Mean irradiance through the layer's thickness (midpoint rule, 200 slices), attenuated from
-            // where the sheet entered the layer at x = -half.
-            double e = 0;
-            for (int k = 0; k < 200; ++k) e += sheet->irradiance(p + Vec3(0, 0, -d / 2 + (k + 0.5) * d / 200), 0, 488.0) / 200;
-            e *= std::exp(-sigmaX * (p.x + half));
-            const double absorbedPhotons = sigmaX * d * e / (hc / 488.0);  // per s per mm²
-            expected += absorbedPhotons * dye.quantumYield() * collection * spectral * pixelMm * pixelMm * detector.exposureS;
-            const size_t i = static_cast<size_t>(y) * r.width + x;
-            measured += r.electrons[i];
-            var += r.stderrElectrons[i] * r.stderrElectrons[i];
-        }
+    const double collection = (1 - std::cos(objective.collectionHalfAngle())) / 2;
+    double expected = layerElectrons(DyeLayer{dye, molar, d, half}, *sheet, 488.0, filter, LayerCamera{6.5e-3 / 16, 16, 0.01, 0.8, collection}, true);
+    double measured = 0, var = 0;
+    for (size_t i = 0; i < r.electrons.size(); ++i) {
+        measured += r.electrons[i];
+        var += r.stderrElectrons[i] * r.stderrElectrons[i];
+    }
     // The model PSF is cut at v = 60 (o.psf.vCut): the Airy pattern holds 1 − J0²(v) − J1²(v) within v.
     // The layer is uniform over the field and its margin, so what leaves the field through the PSF comes
     // back from beyond it, and only the cut is missing.

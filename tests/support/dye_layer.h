@@ -1,0 +1,51 @@
+#pragma once
+// The photon budget of a thin uniform dye layer in the focal plane under a known static sheet, in closed
+// form, for the tests that check the microscope's energy (photon budget, index-mismatched samples, the
+// ground truth): absorbed photons (σa E / (hc/λx)) × Φ × collection fraction × ∫ f(λ) T(λ) QE dλ ×
+// object pixel area × exposure, summed over the pixel centres of a size × size field.
+#include <cmath>
+
+#include "media/fluorophore.h"
+#include "optics/filter.h"
+#include "scene/beam.h"
+
+namespace fluorosim::testing {
+
+struct DyeLayer {
+    Fluorophore dye;
+    double molar = 1e-4;        // mol/L
+    double thicknessMm = 0.001;
+    double halfWidthMm = 0.05;  // the sheet enters the layer at x = -halfWidth
+};
+
+struct LayerCamera {
+    double pixelMm = 6.5e-3 / 16;
+    int size = 16;
+    double exposureS = 0.01;
+    double qe = 0.8;
+    double collection = 0;  // the fraction of 4π the objective collects (with whatever Fresnel loss applies)
+};
+
+// `attenuated`: the sheet loses light in the layer from where it entered (Beer–Lambert); a perfect
+// microscope's image leaves that out. The emission spectrum is integrated on 450-750 nm.
+inline double layerElectrons(const DyeLayer& layer, const BeamProfile& sheet, double excitationNm, const optics::Filter& filter,
+                             const LayerCamera& camera, bool attenuated) {
+    constexpr double hc = 1.98644586e-16;  // J nm
+    const double sigmaX = dyeAbsorption(layer.dye, excitationNm, layer.molar), d = layer.thicknessMm;
+    double spectral = 0;
+    for (double l = 450; l < 750; l += 0.05) spectral += layer.dye.emissionPdf(l + 0.025) * filter.transmission(l + 0.025) * camera.qe * 0.05;
+    double expected = 0;
+    for (int y = 0; y < camera.size; ++y)
+        for (int x = 0; x < camera.size; ++x) {
+            const Vec3 p((x + 0.5 - 0.5 * camera.size) * camera.pixelMm, (0.5 * camera.size - y - 0.5) * camera.pixelMm, 0);
+            // Mean irradiance through the layer's thickness (midpoint rule, 200 slices).
+            double e = 0;
+            for (int k = 0; k < 200; ++k) e += sheet.irradiance(p + Vec3(0, 0, -d / 2 + (k + 0.5) * d / 200), 0, excitationNm) / 200;
+            if (attenuated) e *= std::exp(-sigmaX * (p.x + layer.halfWidthMm));
+            const double absorbedPhotons = sigmaX * d * e / (hc / excitationNm);  // per s per mm²
+            expected += absorbedPhotons * layer.dye.quantumYield() * camera.collection * spectral * camera.pixelMm * camera.pixelMm * camera.exposureS;
+        }
+    return expected;
+}
+
+}  // namespace fluorosim::testing
