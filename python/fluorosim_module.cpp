@@ -6,10 +6,13 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "core/errors.h"
@@ -101,6 +104,57 @@ py::dict renderScene(const py::object& sceneArg, std::optional<int> spp, std::op
     return out;
 }
 
+// Runs `work(cancel, fraction)` without the GIL on a worker thread while this thread, holding the GIL
+// between naps of 0.1 s, passes the work's progress to `progress` (a callable taking a fraction in
+// [0, 1], or None) and watches for Ctrl-C: it sets `cancel`, the work stops at its next check, and the
+// KeyboardInterrupt is raised once the worker has ended (finished work is dropped; nothing is written).
+template <class Work>
+void runInterruptible(const py::object& progress, Work&& work) {
+    std::atomic<bool> cancel{false}, done{false};
+    std::atomic<double> fraction{0.0};
+    std::exception_ptr failure;
+    std::thread worker([&] {
+        try {
+            work(cancel, fraction);
+        } catch (...) {
+            failure = std::current_exception();
+        }
+        done = true;
+    });
+    bool interrupted = false;
+    double reported = -1;
+    std::exception_ptr callbackFailure;
+    while (!done) {
+        {
+            py::gil_scoped_release release;
+            for (int i = 0; i < 10 && !done; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        }
+        if (!interrupted && PyErr_CheckSignals() != 0) {
+            interrupted = true;
+            cancel = true;
+            PyErr_Clear();
+        }
+        const double f = fraction.load();
+        if (!progress.is_none() && !cancel && f != reported) {
+            reported = f;
+            try {
+                progress(f);
+            } catch (...) {  // an error in the callback stops the work and is raised
+                callbackFailure = std::current_exception();
+                cancel = true;
+            }
+        }
+    }
+    {
+        py::gil_scoped_release release;
+        worker.join();
+    }
+    if (callbackFailure) std::rethrow_exception(callbackFailure);
+    if (interrupted) throw Cancelled("interrupted (Ctrl-C)");
+    if (failure) std::rethrow_exception(failure);
+    if (!progress.is_none() && reported != 1.0) progress(1.0);
+}
+
 // Library warnings as Python warnings (UserWarning), so that filters and pytest see them.
 void warnAll(const std::vector<std::string>& messages) {
     for (const std::string& w : messages)
@@ -125,7 +179,8 @@ void addGeometry(py::dict& out, const optics::Microscope& m) {
 
 py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, const std::optional<std::string>& step, std::optional<int> spp,
                  std::optional<int64_t> seed, const std::vector<std::string>& channels, int threads, const std::optional<std::string>& base,
-                 const std::string& estimator, std::optional<int> directSpp, std::optional<double> noiseRatio, std::optional<int> maxSpp) {
+                 const std::string& estimator, std::optional<int> directSpp, std::optional<double> noiseRatio, std::optional<int> maxSpp,
+                 const py::object& progress) {
     optics::AcquireRequest request;
     request.planes = planes;
     request.step = step;
@@ -141,17 +196,19 @@ py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, con
     optics::checkAcquireRequest(request);
     const Scene scene = loadAnyScene(sceneArg, base);
     optics::Microscope m = optics::Microscope::fromScene(scene, database());
-    const optics::AcquireOptions o = optics::applyAcquireRequest(request, scene, m);
+    optics::AcquireOptions o = optics::applyAcquireRequest(request, scene, m);
     const std::vector<size_t> selected = m.selectChannels(channels, "--channels");
     warnAll(scene.warnings);
     warnAll(m.warnings);
     for (size_t c : selected) warnAll(m.channels[c].warnings);
     warnAll(optics::checkSetup(scene, m, selected));
     optics::Stack stack = optics::emptyStack(m, selected);
-    {
-        py::gil_scoped_release release;
-        optics::acquireStack(scene, m, stack, o);
-    }
+    runInterruptible(progress, [&](std::atomic<bool>& cancel, std::atomic<double>& fraction) {
+        o.cancel = &cancel;
+        optics::StackCallbacks callbacks;
+        callbacks.progress = [&](double f) { fraction = f; };
+        if (!optics::acquireStack(scene, m, stack, o, callbacks)) throw Cancelled("acquire cancelled");
+    });
     const std::vector<py::ssize_t> shape{static_cast<py::ssize_t>(stack.channels.size()), stack.planes, stack.height, stack.width};
     py::dict out;
     out["counts"] = toArray(stack.counts, shape);  // (channel, z, y, x), ADU, one noisy read-out
@@ -177,13 +234,14 @@ py::dict groundTruthOf(const py::object& sceneArg, std::optional<int> planes, co
     optics::checkAcquireRequest(request);
     const Scene scene = loadAnyScene(sceneArg, base);
     optics::Microscope m = optics::Microscope::fromScene(scene, database());
-    const optics::AcquireOptions o = optics::applyAcquireRequest(request, scene, m);
+    optics::AcquireOptions o = optics::applyAcquireRequest(request, scene, m);
     const std::vector<size_t> selected = m.selectChannels(channels, "channels");
     optics::GroundTruth truth;
-    {
-        py::gil_scoped_release release;
+    runInterruptible(py::none(), [&](std::atomic<bool>& cancel, std::atomic<double>&) {
+        o.cancel = &cancel;
         truth = optics::groundTruth(scene, m, selected, o);
-    }
+        if (cancel) throw Cancelled("ground truth cancelled");
+    });
     const py::ssize_t z = truth.planes, y = truth.height, x = truth.width;
     const size_t stackPixels = static_cast<size_t>(z * y * x);
     py::dict concentration;
@@ -432,15 +490,15 @@ py::dict fitStack(const py::object& sceneArg, const py::object& stackArg, std::o
     Scene scene = loadAnyScene(sceneArg, base);
     optics::Microscope m = optics::Microscope::fromScene(scene, database());
     optics::applyStackOverrides(m, scene, planes, step);
-    const optics::FitOptions o =
+    optics::FitOptions o =
         fitOptionsFrom(params, scattered, scatteredSpp, likelihood, outer, iterations, priorWeight, labels, unlabelled, channels, std::move(start), threads, seed, scene);
     const optics::ObservedStack observed = observedStack(stackArg, m, stackChannels, pixelSizeUm, zStepUm, camera, values);
     const optics::FitData data = optics::fitData(observed, m, o);
     optics::FitResult r;
-    {
-        py::gil_scoped_release release;
+    runInterruptible(py::none(), [&](std::atomic<bool>& cancel, std::atomic<double>&) {
+        o.cancel = &cancel;
         r = optics::fitConcentrations(scene, m, data, o);
-    }
+    });
     py::list ps;
     std::vector<double> theta, se, crb, conc, concSe;
     for (const optics::FittedParameter& p : r.parameters) {
@@ -542,10 +600,12 @@ PYBIND11_MODULE(fluorosim, mod) {
     mod.def("acquire", &acquireScene, py::arg("scene"), py::kw_only(), py::arg("planes") = py::none(), py::arg("step") = py::none(),
             py::arg("spp") = py::none(), py::arg("seed") = py::none(), py::arg("channels") = std::vector<std::string>{},
             py::arg("threads") = 0, py::arg("base") = py::none(), py::arg("estimator") = "split", py::arg("direct_spp") = py::none(),
-            py::arg("noise_ratio") = py::none(), py::arg("max_spp") = py::none(),
+            py::arg("noise_ratio") = py::none(), py::arg("max_spp") = py::none(), py::arg("progress") = py::none(),
             "Acquire a light-sheet z-stack of a scene with a microscope block. Returns a dict: counts (uint16), expected and "
-            "stderr (float32), each (channel, z, y, x); channels, pixel_size_um, z_step_um, spp, seed. Same numbers as "
-            "`fluorosim acquire` with the same options (estimator: split or path; noise_ratio and max_spp: adaptive sampling).");
+            "stderr (float32), each (channel, z, y, x); channels, the geometry (axes, origin_um, x/y_step_um, z_step_vector_um, "
+            "pixel_size_um, z_step_um), spp, seed. Same numbers as `fluorosim acquire` with the same options (estimator: split or "
+            "path; noise_ratio and max_spp: adaptive sampling). progress: a callable given the fraction done (0..1), about every "
+            "0.1 s. Ctrl-C stops the run and raises KeyboardInterrupt.");
     mod.def("ground_truth", &groundTruthOf, py::arg("scene"), py::kw_only(), py::arg("planes") = py::none(), py::arg("step") = py::none(),
             py::arg("channels") = std::vector<std::string>{}, py::arg("threads") = 0, py::arg("base") = py::none(),
             "The ground truth of the scene's stack on the detector grid: {'concentration': {dye id: (z, y, x) mol/L at the pixel "

@@ -336,3 +336,20 @@ def test_numpy_concentrations_in_ground_truth_out(tmp_path):
     assert truth["ideal"][0, 0].max() > 0
     with pytest.raises(ValueError, match="values must be finite and >= 0"):
         fluorosim.write_volume(str(tmp_path / "bad.vdb"), {"AF488": -c}, voxel="1 um")
+
+
+def test_acquire_reports_progress_and_stops_on_ctrl_c():
+    import _thread
+
+    seen = []
+    fluorosim.acquire(beads(), planes=4, spp=2, progress=seen.append)
+    assert seen and seen[-1] == 1.0
+    assert all(0 <= a <= b <= 1 for a, b in zip(seen, seen[1:]))
+    # Ctrl-C half a second into a run that takes far longer: KeyboardInterrupt within a few seconds.
+    long_run = beads(width=256)
+    timer = threading.Timer(0.5, _thread.interrupt_main)
+    start = time.monotonic()
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        fluorosim.acquire(long_run, planes=64, spp=64)
+    assert time.monotonic() - start < 10
