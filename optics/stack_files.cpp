@@ -74,47 +74,75 @@ void writeStackFiles(const StackOutputs& out, const Stack& stack, const Microsco
     meta.description = description + "; Monte Carlo standard error of the expected photoelectrons";
     writeOmeTiffFloat32(out.stderrElectrons, stack.width, stack.height, planes, channels, firstPlanes(stack.stderrElectrons, stack, planes),
                         meta);
-    writeStackPreview(out.preview, stack, planes, meta.zStepUm / meta.pixelSizeUm);
+    writeStackPreview(out.preview, stack, planes, meta.pixelSizeUm, meta.zStepUm);
 }
 
-void writeStackPreview(const fs::path& png, const Stack& stack, int planes, double zOverPixel) {
+double previewScaleBarUm(double pixelSizeUm, int width) {
+    const double limit = 0.2 * width * pixelSizeUm;
+    double bar = 0;
+    for (int k = -3; k <= 6; ++k)
+        for (double m : {1.0, 2.0, 5.0})
+            if (m * std::pow(10.0, k) <= limit) bar = m * std::pow(10.0, k);
+    return bar;
+}
+
+void writeStackPreview(const fs::path& png, const Stack& stack, int planes, double pixelSizeUm, double zStepUm) {
     static const float colours[4][3] = {{0, 1, 0}, {1, 0, 1}, {1, 0, 0}, {0, 1, 1}};
-    const int width = stack.width, height = stack.height;
-    const int stretch = std::max(1, static_cast<int>(std::lround(zOverPixel)));
-    const int sliceRows = planes * stretch, gap = 4, outW = 2 * width + gap, outH = std::max(height, sliceRows);
+    const int width = stack.width, height = stack.height, gap = 4;
+    const int channels = static_cast<int>(stack.channels.size());
+    const int panels = channels > 1 ? channels + 1 : channels;
+    const int stretch = std::max(1, static_cast<int>(std::lround(zStepUm / pixelSizeUm)));
+    const int sliceRows = planes * stretch;
+    const bool side = planes > 1 && sliceRows * 10 >= height;
+    const int outW = panels * width + (panels - 1) * gap, outH = height + (side ? gap + sliceRows : 0);
     std::vector<float> rgb(static_cast<size_t>(outW) * outH * 3, 0.0f);
     const size_t plane = static_cast<size_t>(width) * height;
-    for (size_t c = 0; c < stack.channels.size(); ++c) {
-        const float* base = stack.expected.data() + stack.pixelOffset(c, 0);
+    auto put = [&](int x, int y, const float* col, float t) {
+        for (int k = 0; k < 3; ++k) rgb[(static_cast<size_t>(y) * outW + x) * 3 + k] += col[k] * std::min(1.0f, t);
+    };
+    auto percentile = [](std::vector<float> v, double q) {
+        std::sort(v.begin(), v.end());
+        return v[static_cast<size_t>(q * (v.size() - 1))];
+    };
+    for (int c = 0; c < channels; ++c) {
+        const float* base = stack.expected.data() + stack.pixelOffset(static_cast<size_t>(c), 0);
         std::vector<float> mip(plane, 0.0f);
         for (int k = 0; k < planes; ++k)
             for (size_t i = 0; i < plane; ++i) mip[i] = std::max(mip[i], base[k * plane + i]);
-        std::vector<float> sorted = mip;
-        std::sort(sorted.begin(), sorted.end());
-        const float scale = sorted[static_cast<size_t>(0.995 * (sorted.size() - 1))];
+        const float scale = percentile(mip, 0.995);
         if (!(scale > 0)) continue;
         const float* col = colours[c % 4];
-        auto put = [&](int x, int y, float v, float panelScale) {
-            const float t = std::min(1.0f, v / panelScale);
-            for (int k = 0; k < 3; ++k) rgb[(static_cast<size_t>(y) * outW + x) * 3 + k] += col[k] * t;
-        };
         for (int y = 0; y < height; ++y)
-            for (int x = 0; x < width; ++x) put(x, y, mip[static_cast<size_t>(y) * width + x], scale);
-        // The x–z panel projects the maximum over y (a single row would miss most neurites of a thin stack),
-        // each plane `stretch` rows tall so that z keeps its physical scale.
-        // It has its own scale (its 99th percentile): a maximum over y is brighter than the x–y projection.
-        std::vector<float> side(static_cast<size_t>(planes) * width, 0.0f);
+            for (int x = 0; x < width; ++x) {
+                const float t = mip[static_cast<size_t>(y) * width + x] / scale;
+                put(c * (width + gap) + x, y, col, t);
+                if (panels > channels) put(channels * (width + gap) + x, y, col, t);
+            }
+        if (!side) continue;
+        // The x-z panel, under the last panel: the maximum over y (a single row misses most neurites), each
+        // plane `stretch` rows tall, on its own scale (a maximum over y is brighter than the x-y projection).
+        std::vector<float> xz(static_cast<size_t>(planes) * width, 0.0f);
         for (int k = 0; k < planes; ++k)
             for (int x = 0; x < width; ++x)
                 for (int y = 0; y < height; ++y)
-                    side[static_cast<size_t>(k) * width + x] = std::max(side[static_cast<size_t>(k) * width + x], base[k * plane + static_cast<size_t>(y) * width + x]);
-        std::vector<float> sortedSide = side;
-        std::sort(sortedSide.begin(), sortedSide.end());
-        const float sideScale = std::max(sortedSide[static_cast<size_t>(0.99 * (sortedSide.size() - 1))], 1e-30f);
+                    xz[static_cast<size_t>(k) * width + x] = std::max(xz[static_cast<size_t>(k) * width + x], base[k * plane + static_cast<size_t>(y) * width + x]);
+        const float sideScale = std::max(percentile(xz, 0.99), 1e-30f);
         for (int k = 0; k < planes; ++k)
             for (int x = 0; x < width; ++x)
-                for (int r = 0; r < stretch; ++r) put(width + gap + x, k * stretch + r, side[static_cast<size_t>(k) * width + x], sideScale);
+                for (int r = 0; r < stretch; ++r)
+                    put((panels - 1) * (width + gap) + x, height + gap + k * stretch + r, col, xz[static_cast<size_t>(k) * width + x] / sideScale);
     }
+    // Scale bars: 2 rows (at least), a margin of 1/32 of the panel.
+    const int barPixels = static_cast<int>(std::lround(previewScaleBarUm(pixelSizeUm, width) / pixelSizeUm));
+    const int thick = std::max(2, height / 128), margin = std::max(2, width / 32);
+    static const float white[3] = {1, 1, 1};
+    for (int p = 0; p < panels && barPixels > 0; ++p)
+        for (int y = height - margin - thick; y < height - margin; ++y)
+            for (int x = margin; x < margin + barPixels && x < width; ++x) {
+                if (y < 0) continue;
+                for (int k = 0; k < 3; ++k) rgb[(static_cast<size_t>(y) * outW + p * (width + gap) + x) * 3 + k] = 0;
+                put(p * (width + gap) + x, y, white, 1.0f);
+            }
     // The PNG writer applies the sRGB curve; these values are already display-scaled in [0, 1].
     writePngPreview(png.string(), outW, outH, rgb, 1.0);
 }

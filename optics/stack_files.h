@@ -24,10 +24,14 @@ CameraMetadata cameraMetadata(const DetectorOptions& detector);
 void writeStackFiles(const StackOutputs& out, const Stack& stack, const Microscope& microscope, int planes,
                      const std::string& description);
 
-// The preview: maximum projection along z (left) and the x-z slice through the middle row (right, z
-// stretched to the true aspect) of the expected electrons; channel colours green, magenta, red,
-// cyan, each scaled to its 99.5th percentile.
-void writeStackPreview(const std::filesystem::path& png, const Stack& stack, int planes, double zOverPixel);
+// The preview of the expected electrons, as a microscopist looks at a stack: the x-y maximum projection
+// of each channel in its colour (green, magenta, red, cyan, each scaled to its 99.5th percentile), then
+// their merge (with two or more channels), side by side, with a white scale bar of
+// previewScaleBarUm(...) in the bottom left of each panel. Under them, the x-z maximum over y at the true
+// aspect, only when the stack is at least a tenth of the field deep (a thin stack's strip says nothing).
+void writeStackPreview(const std::filesystem::path& png, const Stack& stack, int planes, double pixelSizeUm, double zStepUm);
+// The scale bar: the largest of 1, 2, 5 × 10^k µm not over a fifth of the field's width.
+double previewScaleBarUm(double pixelSizeUm, int width);
 
 // Checkpoint: a header with a fingerprint of everything that determines the result, then one record
 // per finished plane, each flushed to disk as it is written.

@@ -22,6 +22,16 @@ using namespace testing;
 
 const fs::path kBeads = fs::path(FLUOROSIM_SOURCE_DIR) / "samples" / "lightsheet" / "beads.json";
 
+// Width and height of a PNG, from its IHDR chunk.
+std::pair<int, int> pngSize(const fs::path& file) {
+    const std::string bytes = readFile(file);
+    auto be32 = [&](size_t at) {
+        return static_cast<int>((static_cast<unsigned char>(bytes.at(at)) << 24) | (static_cast<unsigned char>(bytes.at(at + 1)) << 16) |
+                                (static_cast<unsigned char>(bytes.at(at + 2)) << 8) | static_cast<unsigned char>(bytes.at(at + 3)));
+    };
+    return {be32(16), be32(20)};
+}
+
 // beads.json with absolute mesh paths, small (16 x 16 pixels, with one more bead in the middle of the
 // field so that it holds one), after `edit`.
 fs::path beads(const TempDir& dir, const std::function<void(json&)>& edit = {}) {
@@ -104,6 +114,9 @@ TEST(AcquireCli, FilterWarningsNameOnlyAChannelBlindToItsOwnDyes) {
     auto r = run("semrock_FF01-609-54", {});
     ASSERT_EQ(r.exitCode, 0) << r.err;
     EXPECT_FALSE(contains(r.err, "emission")) << r.err;
+    // The preview: each channel's x-y projection and their merge, 16 pixels wide with 4 between; one
+    // plane has no x-z panel.
+    EXPECT_EQ(pngSize(dir.path() / "s.preview.png"), std::make_pair(3 * 16 + 2 * 4, 16));
     r = run("semrock_FF01-525-45", {});  // the red channel behind the green filter: the real mistake
     ASSERT_EQ(r.exitCode, 0) << r.err;
     EXPECT_TRUE(contains(r.err, "warning: channel \"red\": its laser lines (561 nm) excite alexa_fluor_594 (47 % of its peak")) << r.err;
@@ -146,6 +159,8 @@ TEST(AcquireCli, SetUpMistakesAreCaughtBeforeRendering) {
         << r.err;
     EXPECT_TRUE(contains(r.err, "warning: planes 4-5 (7.5 um to 12.5 um from the focus)")) << r.err;
     EXPECT_FALSE(contains(r.err, "plane 2")) << r.err;
+    // One channel, no merge; 6 planes 5 um apart are deep enough for the x-z panel (12 rows a plane).
+    EXPECT_EQ(pngSize(dir.path() / "s.preview.png"), std::make_pair(64, 64 + 4 + 6 * 12));
     r = run([&](json& j) {
         wide(j);
         j["lights"][0]["waist"] = "3 mm";

@@ -15,6 +15,7 @@
 #include "core/errors.h"
 #include "optics/detector.h"
 #include "optics/ome_tiff.h"
+#include "optics/stack_files.h"
 
 namespace fluorosim::optics {
 namespace {
@@ -296,6 +297,14 @@ TEST(OmeTiff, DetectorStack) {
     ASSERT_EQ(info.pixels.size(), counts.size());
     for (size_t i = 0; i < counts.size(); ++i) ASSERT_EQ(info.pixels[i], counts[i]);
     EXPECT_EQ(readTiffStack(dir.path() / "detector_expected.ome.tif").pages, planes * channels);
+}
+
+// The preview's scale bar: a round length of at most a fifth of the field.
+TEST(StackPreview, ScaleBarIsARoundFifthOfTheField) {
+    EXPECT_DOUBLE_EQ(optics::previewScaleBarUm(0.40625, 256), 20);  // 104 um field
+    EXPECT_DOUBLE_EQ(optics::previewScaleBarUm(0.40625, 64), 5);    // 26 um
+    EXPECT_DOUBLE_EQ(optics::previewScaleBarUm(0.40625, 16), 1);    // 6.5 um
+    EXPECT_DOUBLE_EQ(optics::previewScaleBarUm(6.5, 2048), 2000);   // 13.3 mm at 1x
 }
 
 }  // namespace
