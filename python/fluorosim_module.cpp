@@ -5,6 +5,7 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
 
 #include <atomic>
 #include <chrono>
@@ -298,7 +299,7 @@ py::array_t<double> filterTransmission(const std::string& name, const std::vecto
 // NumPy arrays (z, y, x) into an OpenVDB file a scene's "volume" can name: one float grid per entry of
 // `grids` (concentrations in `units`), and an optional Int32 label grid. Voxel (i, j, k) = array[k, j, i]
 // has its centre at origin + (i, j, k) × voxel, so array[0, 0, 0] lies at `origin`.
-py::dict writeVolume(const std::string& path, const py::dict& grids, const std::string& voxel, const std::vector<std::string>& origin,
+py::dict writeVolume(const fs::path& file, const py::dict& grids, const std::string& voxel, const std::vector<std::string>& origin,
                      const std::string& units, const std::optional<py::array_t<int32_t, py::array::c_style | py::array::forcecast>>& labels,
                      const std::string& labelName) {
     const double voxelMm = parseQuantity(voxel, Dimension::Length, "voxel");
@@ -344,24 +345,25 @@ py::dict writeVolume(const std::string& path, const py::dict& grids, const std::
     }
     std::vector<GridToWrite> out;
     for (size_t g = 0; g < made.size(); ++g) out.push_back({names[g], &made[g], labels && g + 1 == made.size()});
-    writeDensityGrids(path, out);
+    writeDensityGrids(file.string(), out);
     py::dict result;
-    result["output"] = path;
+    result["output"] = file.string();
     result["grids"] = names;
     result["voxel_size_um"] = voxelMm * 1e3;
     return result;
 }
 
 // `fluorosim voxelize` from Python: the same checks and messages, the grids written to `output`.
-py::dict voxelizeSwc(const std::vector<std::string>& swc, const std::string& voxel, const std::vector<std::string>& dyes,
-                     const std::vector<std::string>& concentrations, const std::string& output, const std::vector<std::string>& grids,
+// Paths as str or any os.PathLike (pathlib.Path), as Python users hold them.
+py::dict voxelizeSwc(const std::vector<fs::path>& swc, const std::string& voxel, const std::vector<std::string>& dyes,
+                     const std::vector<std::string>& concentrations, const fs::path& output, const std::vector<std::string>& grids,
                      const std::string& mode, const std::optional<std::string>& membraneThickness, int supersampling, int threads) {
     optics::VoxelizeArgs a;
-    a.swc = swc;
+    for (const fs::path& f : swc) a.swc.push_back(f.string());
     a.voxel = voxel;
     a.dyes = dyes;
     a.concentrations = concentrations;
-    a.output = output;
+    a.output = output.string();
     a.grids = grids;
     a.mode = mode;
     a.membraneThickness = membraneThickness;

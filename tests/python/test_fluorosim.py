@@ -106,6 +106,9 @@ def test_voxelize_writes_the_cli_grids(tmp_path):
     # The files differ only in OpenVDB's per-file UUID; the CLI's summary line gives the same grid.
     assert f"grid alexa_fluor_594 [uM]: {grid['active_voxels']} voxels, covered {grid['covered_volume_um3']:.6g} um^3" in run.stdout
     assert (tmp_path / "cli.vdb").stat().st_size == (tmp_path / "py.vdb").stat().st_size
+    # pathlib.Path wherever a path is meant.
+    fluorosim.voxelize([Path(swc[0])], voxel="1um", dyes=["AF594"], concentrations=["10uM"], output=tmp_path / "path.vdb")
+    assert (tmp_path / "path.vdb").stat().st_size == (tmp_path / "py.vdb").stat().st_size
     assert grid["name"] == "alexa_fluor_594" and grid["units"] == "uM" and grid["max_value"] == pytest.approx(10, rel=1e-6)
     assert grid["covered_volume_um3"] == pytest.approx(grid["analytic_volume_um3"], rel=0.05)
     with pytest.raises(ValueError, match="--voxel"):
@@ -324,7 +327,7 @@ def test_numpy_concentrations_in_ground_truth_out(tmp_path):
     # array[k, j, i] at origin + (i, j, k) voxels; pixel (x, y) of plane 0 at ((x + 0.5 - 8) p, (8 - y - 0.5) p, 0):
     # rows run down the image, so the array's y axis is flipped.
     origin = [f"{(0.5 - 8) * pixel} um", f"{(0.5 - 8) * pixel} um", f"{-2 * pixel} um"]
-    written = fluorosim.write_volume(str(tmp_path / "v.vdb"), {"AF488": c}, voxel=f"{pixel} um", origin=origin, units="uM")
+    written = fluorosim.write_volume(tmp_path / "v.vdb", {"AF488": c}, voxel=f"{pixel} um", origin=origin, units="uM")
     assert written["grids"] == ["AF488"]
     scene = beads()
     scene["shapes"] = [scene["shapes"][0]]
