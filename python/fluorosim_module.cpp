@@ -178,6 +178,26 @@ void addGeometry(py::dict& out, const optics::Microscope& m) {
     out["z_step_um"] = m.stack.stepMm * 1e3;
 }
 
+// A stack's scene, microscope and options from Python's arguments: the request checked before the
+// scene loads, the channels selected (`what` names the option in errors), the library's warnings raised
+// as Python warnings. Built in place: the scene is not moved once loaded.
+struct StackSetup {
+    const Scene scene;
+    optics::Microscope microscope;
+    optics::AcquireOptions options;
+    std::vector<size_t> channels;
+    StackSetup(const py::object& sceneArg, const std::optional<std::string>& base, const optics::AcquireRequest& request,
+               const std::vector<std::string>& names, const std::string& what)
+        : scene((optics::checkAcquireRequest(request), loadAnyScene(sceneArg, base))), microscope(optics::Microscope::fromScene(scene, database())) {
+        options = optics::applyAcquireRequest(request, scene, microscope);
+        channels = microscope.selectChannels(names, what);
+        warnAll(scene.warnings);
+        warnAll(microscope.warnings);
+        for (size_t c : channels) warnAll(microscope.channels[c].warnings);
+        warnAll(optics::checkSetup(scene, microscope, channels));
+    }
+};
+
 py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, const std::optional<std::string>& step, std::optional<int> spp,
                  std::optional<int64_t> seed, const std::vector<std::string>& channels, int threads, const std::optional<std::string>& base,
                  const std::string& estimator, std::optional<int> directSpp, std::optional<double> noiseRatio, std::optional<int> maxSpp,
@@ -194,15 +214,11 @@ py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, con
                           "the scattered light");
     request.noiseRatio = noiseRatio;
     request.maxSpp = maxSpp;
-    optics::checkAcquireRequest(request);
-    const Scene scene = loadAnyScene(sceneArg, base);
-    optics::Microscope m = optics::Microscope::fromScene(scene, database());
-    optics::AcquireOptions o = optics::applyAcquireRequest(request, scene, m);
-    const std::vector<size_t> selected = m.selectChannels(channels, "--channels");
-    warnAll(scene.warnings);
-    warnAll(m.warnings);
-    for (size_t c : selected) warnAll(m.channels[c].warnings);
-    warnAll(optics::checkSetup(scene, m, selected));
+    StackSetup setup(sceneArg, base, request, channels, "--channels");
+    const Scene& scene = setup.scene;
+    const optics::Microscope& m = setup.microscope;
+    optics::AcquireOptions& o = setup.options;
+    const std::vector<size_t>& selected = setup.channels;
     optics::Stack stack = optics::emptyStack(m, selected);
     runInterruptible(progress, [&](std::atomic<bool>& cancel, std::atomic<double>& fraction) {
         o.cancel = &cancel;
@@ -232,11 +248,11 @@ py::dict groundTruthOf(const py::object& sceneArg, std::optional<int> planes, co
     request.planes = planes;
     request.step = step;
     request.threads = threads;
-    optics::checkAcquireRequest(request);
-    const Scene scene = loadAnyScene(sceneArg, base);
-    optics::Microscope m = optics::Microscope::fromScene(scene, database());
-    optics::AcquireOptions o = optics::applyAcquireRequest(request, scene, m);
-    const std::vector<size_t> selected = m.selectChannels(channels, "channels");
+    StackSetup setup(sceneArg, base, request, channels, "channels");
+    const Scene& scene = setup.scene;
+    const optics::Microscope& m = setup.microscope;
+    optics::AcquireOptions& o = setup.options;
+    const std::vector<size_t>& selected = setup.channels;
     optics::GroundTruth truth;
     runInterruptible(py::none(), [&](std::atomic<bool>& cancel, std::atomic<double>&) {
         o.cancel = &cancel;

@@ -28,14 +28,7 @@ TEST(GroundTruth, PerfectImageAndConcentrationOfADyeLayer) {
     addMediumBox(scene, Vec3(-half, -half, -d / 2), Vec3(half, half, d / 2), 1);
     scene.shapes.back().outsideMedium = 0;
     addBath(scene, 0.4, 0);
-    LightSheetSpec spec;
-    spec.wavelengthNm = 488;
-    spec.powerMw = 1;
-    spec.waistMm = 0.01;
-    spec.heightMm = 1;
-    spec.refractiveIndex = 1.33;
-    auto sheet = optics::makeLightSheet(spec);
-    scene.lights.push_back(BeamLight{sheet, spec});
+    const auto sheet = addLayerSheet(scene, 1.33);
     scene.camera.medium = 0;
     scene.finalize();
 

@@ -76,14 +76,7 @@ TEST_P(MismatchedLayer, KeepsThePhotonBudgetWithTheSampleConeAndFresnel) {
     scene.media.emplace_back("layer", Spectrum::constant(0.0), Spectrum::constant(0.0), 0.0, sampleIndex, std::vector<DyeComponent>{{dye, molar}});
     addMediumBox(scene, Vec3(-half, -half, -d / 2), Vec3(half, half, d / 2), static_cast<int>(scene.media.size()) - 1);
     scene.shapes.back().outsideMedium = block;
-    LightSheetSpec spec;
-    spec.wavelengthNm = 488;
-    spec.powerMw = 1;
-    spec.waistMm = 0.01;
-    spec.heightMm = 1;
-    spec.refractiveIndex = sampleIndex;
-    auto sheet = optics::makeLightSheet(spec);
-    scene.lights.push_back(BeamLight{sheet, spec});
+    const auto sheet = addLayerSheet(scene, sampleIndex);
     scene.finalize();
 
     const optics::ObjectiveOptions objective = waterObjective();

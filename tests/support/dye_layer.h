@@ -7,7 +7,9 @@
 
 #include "media/fluorophore.h"
 #include "optics/filter.h"
+#include "optics/light_sheet.h"
 #include "scene/beam.h"
+#include "scene/scene.h"
 
 namespace fluorosim::testing {
 
@@ -25,6 +27,20 @@ struct LayerCamera {
     double qe = 0.8;
     double collection = 0;  // the fraction of 4π the objective collects (with whatever Fresnel loss applies)
 };
+
+// The layer's sheet: 488 nm, 1 mW, a waist of 10 µm (ten times the layer: nearly flat across it; the
+// closed form integrates it exactly), 1 mm high, in a medium of `index`; added to the scene's lights.
+inline std::shared_ptr<BeamProfile> addLayerSheet(Scene& scene, double index) {
+    LightSheetSpec spec;
+    spec.wavelengthNm = 488;
+    spec.powerMw = 1;
+    spec.waistMm = 0.01;
+    spec.heightMm = 1;
+    spec.refractiveIndex = index;
+    auto sheet = optics::makeLightSheet(spec);
+    scene.lights.push_back(BeamLight{sheet, spec});
+    return sheet;
+}
 
 // `attenuated`: the sheet loses light in the layer from where it entered (Beer–Lambert); a perfect
 // microscope's image leaves that out. The emission spectrum is integrated on 450-750 nm.
