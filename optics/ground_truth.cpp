@@ -9,11 +9,9 @@
 namespace fluorosim::optics {
 
 Vec3 pixelCentreMm(const Microscope& m, int plane, double x, double y) {
-    const Vec3 axis = normalize(m.focus.towardObjective);
-    const Vec3 right = normalize(cross(m.focus.up, axis)), up = cross(axis, right);
     const double pixel = m.pixelSizeMm();
-    return m.focalPlaneAt(m.planeOffsetMm(plane)).centreMm + right * ((x + 0.5 - 0.5 * m.width) * pixel) +
-           up * ((0.5 * m.height - (y + 0.5)) * pixel);
+    return m.focalPlaneAt(m.planeOffsetMm(plane)).centreMm + m.focus.right() * ((x + 0.5 - 0.5 * m.width) * pixel) +
+           m.focus.imageUp() * ((0.5 * m.height - (y + 0.5)) * pixel);
 }
 
 GroundTruth groundTruth(const Scene& scene, const Microscope& m, const std::vector<size_t>& channels, const AcquireOptions& options) {
@@ -31,7 +29,7 @@ GroundTruth groundTruth(const Scene& scene, const Microscope& m, const std::vect
         for (const DyeComponent& d : med.dyes())
             if (dyeIndex.emplace(d.dye.id(), out.dyes.size()).second) out.dyes.push_back(d.dye.id());
     out.concentration.assign(out.dyes.size() * stackPixels, 0.0f);
-    const Vec3 axis = normalize(m.focus.towardObjective);
+    const Vec3 axis = m.focus.axis();
     const size_t rows = static_cast<size_t>(m.stack.planes) * static_cast<size_t>(m.height);
     parallelFor(rows, options.threads, [&](size_t row) {
         const int plane = static_cast<int>(row / static_cast<size_t>(m.height)), y = static_cast<int>(row % static_cast<size_t>(m.height));

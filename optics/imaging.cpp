@@ -14,8 +14,8 @@ Imaging::Imaging(const ObjectiveOptions& objective, const FocalPlane& focus, con
     if (!psf_) throw ConfigError("imaging needs a PSF");
     if (std::abs(psf_->pupil().na - objective.na) > 1e-12)
         throw ConfigError("the PSF's NA " + std::to_string(psf_->pupil().na) + " is not the objective's " + std::to_string(objective.na));
-    right_ = normalize(cross(focus.up, axis_));
-    up_ = cross(axis_, right_);
+    right_ = focus.right();
+    up_ = focus.imageUp();
     frame_ = Frame{right_, up_, axis_};
     pixelMm_ = detector.pixelPitchUm * 1e-3 / objective.magnification;
     cosMax_ = std::cos(psf_->pupil().collectionHalfAngle());
@@ -59,11 +59,12 @@ Imaging::CameraStart Imaging::cameraStart(const Scene& scene, bool bends, const 
     // Straight down to the focal point first: most rays meet no refraction on the way.
     if (traceStraightLine(scene, out.ray, out.medium, 0.0, workingDistanceMm_, LineSurfaces::UntilRefraction).end != LineEnd::Refraction) return out;
     const Vec3 w = -out.ray.d;
-    const BentLine line = collectionLine(scene, focal, mediumAt(scene, focal, axis_), w);
+    const int focalMedium = mediumAt(scene, focal, axis_);
+    const BentLine line = collectionLine(scene, focal, focalMedium, w);
     if (!line.bent()) return out;
     const BentLine::Piece& sample = line.pieces.front();
     out.ray = Ray{line.pieces[1].ray.o, -w};
-    out.medium = sample.segments.empty() ? mediumAt(scene, focal, axis_) : sample.segments.back().medium;
+    out.medium = sample.segments.empty() ? focalMedium : sample.segments.back().medium;
     const SurfaceHit& crossing = line.pieces[1].crossing;
     out.tMin = crossing.epsilon / std::max(std::abs(dot(crossing.n, w)), 1e-2);
     out.weight = quadratureTransmittance(scene, line, wl, 0.5, 1);

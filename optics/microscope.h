@@ -32,6 +32,11 @@ struct FocalPlane {
     Vec3 towardObjective{0, 0, 1};  // unit axis from the sample to the objective
     Vec3 up{0, 1, 0};               // image rows run along -up
     void validate() const;          // finite, non-zero, up not parallel to the axis
+    // The image's frame: the unit axis toward the objective, `right` along the columns (up × axis) and
+    // `imageUp` = axis × right, the part of `up` in the plane (rows run along -imageUp).
+    Vec3 axis() const { return normalize(towardObjective); }
+    Vec3 right() const { return normalize(cross(up, axis())); }
+    Vec3 imageUp() const { return cross(axis(), right()); }
 };
 
 struct MicroscopeChannel {

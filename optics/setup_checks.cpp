@@ -39,8 +39,7 @@ std::string planeRange(const Microscope& m, int first, int last) {
 
 std::vector<std::string> checkSetup(const Scene& scene, const Microscope& m, const std::vector<size_t>& channels) {
     std::vector<std::string> out;
-    const Vec3 axis = normalize(m.focus.towardObjective);
-    const Vec3 right = normalize(cross(m.focus.up, axis)), up = cross(axis, right);
+    const Vec3 axis = m.focus.axis(), right = m.focus.right(), up = m.focus.imageUp();
     const double halfW = 0.5 * m.width * m.pixelSizeMm(), halfH = 0.5 * m.height * m.pixelSizeMm();
     const std::vector<std::pair<double, double>> field{{0, 0}, {-halfW, -halfH}, {halfW, -halfH}, {-halfW, halfH}, {halfW, halfH},
                                                        {0, -halfH}, {0, halfH}, {-halfW, 0}, {halfW, 0}};

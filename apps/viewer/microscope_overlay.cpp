@@ -33,9 +33,9 @@ double MicroscopeOverlay::offsetUm(int plane) const { return microscope_.planeOf
 FieldOfView MicroscopeOverlay::fieldOfView(int plane) const {
     const optics::FocalPlane f = microscope_.focalPlaneAt(microscope_.planeOffsetMm(plane));
     FieldOfView v;
-    v.towardObjective = normalize(f.towardObjective);
-    v.right = normalize(cross(f.up, v.towardObjective));
-    v.up = cross(v.towardObjective, v.right);
+    v.towardObjective = f.axis();
+    v.right = f.right();
+    v.up = f.imageUp();
     v.centreUm = f.centreMm * kUmPerMm;
     v.pixelUm = microscope_.pixelSizeMm() * kUmPerMm;
     v.width = microscope_.width;

@@ -115,7 +115,7 @@ PathTracer::TransmittanceEstimate PathTracer::estimateTransmittance(const Vec3& 
         }
         if (!hit) return e;
         const ShapeInfo& s = scene_.shapes[hit->shape];
-        if (untilRefraction && s.isInterface && s.material != kNone && scene_.materials[static_cast<size_t>(s.material)]->isSpecular())
+        if (untilRefraction && refracts(scene_, s))
             return e;
         if (!(s.isInterface && s.material == kNone)) return {SampledSpectrum(0.0), e.r_u, e.r_l};
         medium = mediumAfterCrossing(s, hit->n, r.d, medium);

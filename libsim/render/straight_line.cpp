@@ -9,6 +9,10 @@
 
 namespace fluorosim {
 
+bool refracts(const Scene& scene, const ShapeInfo& s) {
+    return s.isInterface && s.material != kNone && scene.materials[static_cast<size_t>(s.material)]->isSpecular();
+}
+
 StraightLine traceStraightLine(const Scene& scene, const Ray& ray, int medium, double tMin, double tMax, LineSurfaces surfaces) {
     StraightLine line;
     Ray r = ray;
@@ -33,8 +37,7 @@ StraightLine traceStraightLine(const Scene& scene, const Ray& ray, int medium, d
             if (surfaces == LineSurfaces::StopAtAny) {
                 line.end = LineEnd::Surface;
             } else {
-                const bool refracts = s.isInterface && s.material != kNone && scene.materials[static_cast<size_t>(s.material)]->isSpecular();
-                line.end = refracts ? LineEnd::Refraction : LineEnd::Blocked;
+                line.end = refracts(scene, s) ? LineEnd::Refraction : LineEnd::Blocked;
             }
             return line;
         }
@@ -92,7 +95,7 @@ BentLine traceBentLine(const Scene& scene, const Ray& ray, int medium, const Vec
 
 bool hasRefractingSurfaces(const Scene& scene) {
     for (const ShapeInfo& s : scene.shapes)
-        if (s.isInterface && s.material != kNone && scene.materials[static_cast<size_t>(s.material)]->isSpecular()) return true;
+        if (refracts(scene, s)) return true;
     return false;
 }
 

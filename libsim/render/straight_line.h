@@ -52,6 +52,8 @@ struct BentLine {
 };
 BentLine traceBentLine(const Scene& scene, const Ray& ray, int medium, const Vec3& planePoint, const Vec3& planeNormal);
 
+// A smooth dielectric interface: where a line bends (a rough one scatters and blocks it).
+bool refracts(const Scene& scene, const ShapeInfo& shape);
 // Whether any smooth dielectric interface (where lines bend) exists in the scene.
 bool hasRefractingSurfaces(const Scene& scene);
 

@@ -450,21 +450,30 @@ TEST(ObservedStack, ReadsItsOwnStacksAndRefusesOtherFiles) {
 namespace fluorosim {
 namespace {
 
+// The gradient specimen: every rod at its template's concentration times 1 + 0.1 (x + 10 µm), from 1 at
+// x = −10 µm to 3 at x = 10 µm; its expected photoelectrons, and the uniform template's options.
+double gradientProfile(double xUm) { return 1 + 0.1 * (xUm + 10); }
+testing::FitSceneOptions gradientTemplateOptions() {
+    testing::FitSceneOptions o;
+    o.power488mW = o.power561mW = 0.004;
+    return o;
+}
+std::vector<double> gradientSpecimenElectrons() {
+    testing::FitSceneOptions truthOptions = gradientTemplateOptions();
+    truthOptions.profile = gradientProfile;
+    FitSetup truth(truthOptions);
+    EXPECT_TRUE(truth.op->refreshGains(truth.scene));
+    return truth.expected(truth.op->columns(*truth.map), {1, 1, 1});
+}
+
 // A coarse grid inside the label masks recovers a gradient of concentration: the truth is every rod
 // at its template's concentration times 1 + 0.1 (x + 10 µm), from 1 at x = −10 µm to 3 at x = 10 µm
 // (which trilinear nodes represent exactly), fitted on a grid of 4 µm cells with the prior's weight from
 // the discrepancy rule.
 TEST(ConcentrationFit, CoarseGridRecoversAConcentrationGradient) {
-    auto profile = [](double x) { return 1 + 0.1 * (x + 10); };
-    testing::FitSceneOptions truthOptions;
-    truthOptions.profile = profile;
-    truthOptions.power488mW = truthOptions.power561mW = 0.004;
-    FitSetup truth(truthOptions);
-    ASSERT_TRUE(truth.op->refreshGains(truth.scene));
-    const std::vector<double> mu = truth.expected(truth.op->columns(*truth.map), {1, 1, 1});
-    testing::FitSceneOptions templateOptions;
-    templateOptions.power488mW = templateOptions.power561mW = 0.004;
-    FitSetup s(templateOptions);
+    const auto profile = gradientProfile;
+    const std::vector<double> mu = gradientSpecimenElectrons();
+    FitSetup s(gradientTemplateOptions());
     const optics::Detector camera(s.microscope.detector);
     const std::vector<uint16_t> adu = camera.readOut(mu, 5, 0);
     optics::FitData d;
@@ -584,16 +593,9 @@ namespace {
 // CoarseGridRecoversAConcentrationGradient, 12 noise realisations per weight, over the nodes with SNR
 // >= 20. A larger weight trades variance for bias; the table goes to docs/inverse.md.
 TEST(ConcentrationFit, CoarseGridTradesVarianceForBiasWithThePriorWeight) {
-    auto profile = [](double x) { return 1 + 0.1 * (x + 10); };
-    testing::FitSceneOptions truthOptions;
-    truthOptions.profile = profile;
-    truthOptions.power488mW = truthOptions.power561mW = 0.004;
-    FitSetup truth(truthOptions);
-    ASSERT_TRUE(truth.op->refreshGains(truth.scene));
-    const std::vector<double> mu = truth.expected(truth.op->columns(*truth.map), {1, 1, 1});
-    testing::FitSceneOptions templateOptions;
-    templateOptions.power488mW = templateOptions.power561mW = 0.004;
-    FitSetup s(templateOptions);
+    const auto profile = gradientProfile;
+    const std::vector<double> mu = gradientSpecimenElectrons();
+    FitSetup s(gradientTemplateOptions());
     ASSERT_TRUE(s.op->refreshGains(s.scene));
     const optics::ParameterMap grid = optics::ParameterMap::grid(0.004, s.op->lattices());
     const optics::SparseColumns cols = s.op->columns(grid);

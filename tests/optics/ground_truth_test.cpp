@@ -18,15 +18,12 @@ namespace {
 using namespace testing;
 
 TEST(GroundTruth, PerfectImageAndConcentrationOfADyeLayer) {
-    const double molar = 1e-4, d = 0.001, half = 0.05;
-    const Fluorophore dye = separatedBandDye(70000, 0.9);
+    const DyeLayer layer{separatedBandDye(70000, 0.9), 1e-4, 0.001, 0.05};
     Scene scene;
     scene.spectral.lambdaMin = 450;
     scene.spectral.lambdaMax = 750;
     scene.media.emplace_back("tissue", Spectrum::constant(0.05), Spectrum::constant(5.0), 0.9, 1.33);
-    scene.media.emplace_back("layer", Spectrum::constant(0.05), Spectrum::constant(5.0), 0.9, 1.33, std::vector<DyeComponent>{{dye, molar}});
-    addMediumBox(scene, Vec3(-half, -half, -d / 2), Vec3(half, half, d / 2), 1);
-    scene.shapes.back().outsideMedium = 0;
+    addDyeLayer(scene, layer, 0, 0.05, 5.0, 0.9, 1.33);
     addBath(scene, 0.4, 0);
     const auto sheet = addLayerSheet(scene, 1.33);
     scene.camera.medium = 0;
@@ -55,12 +52,12 @@ TEST(GroundTruth, PerfectImageAndConcentrationOfADyeLayer) {
     ASSERT_EQ(truth.concentration.size(), 3u * 12 * 12);
     ASSERT_EQ(truth.ideal.size(), 3u * 12 * 12);
     for (int k = 0; k < 3; ++k)
-        for (size_t i = 0; i < 144; ++i) EXPECT_EQ(truth.concentration[static_cast<size_t>(k) * 144 + i], k == 1 ? static_cast<float>(molar) : 0.0f);
+        for (size_t i = 0; i < 144; ++i) EXPECT_EQ(truth.concentration[static_cast<size_t>(k) * 144 + i], k == 1 ? static_cast<float>(layer.molar) : 0.0f);
 
     // The closed form of the photon budget (photon_budget_test.cpp) without the sheet's loss in the
     // layer and the tissue, on the middle plane.
     const double collection = (1 - std::cos(m.objective.collectionHalfAngle())) / 2;
-    double expected = layerElectrons(DyeLayer{dye, molar, d, half}, *sheet, 488.0, channel.emissionPath, LayerCamera{m.pixelSizeMm(), 12, 0.01, 0.8, collection}, false);
+    double expected = layerElectrons(layer, *sheet, 488.0, channel.emissionPath, LayerCamera{m.pixelSizeMm(), 12, 0.01, 0.8, collection}, false);
     double ideal = 0;
     for (int y = 0; y < 12; ++y)
         for (int x = 0; x < 12; ++x) {

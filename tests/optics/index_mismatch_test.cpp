@@ -67,15 +67,12 @@ class MismatchedLayer : public ::testing::TestWithParam<double> {};
 
 TEST_P(MismatchedLayer, KeepsThePhotonBudgetWithTheSampleConeAndFresnel) {
     const double sampleIndex = GetParam();
-    const double molar = 1e-4, d = 0.001, half = 0.05, depth = 0.02;
-    const Fluorophore dye = separatedBandDye(70000, 0.9);
+    const DyeLayer layer{separatedBandDye(70000, 0.9), 1e-4, 0.001, 0.05};
     Scene scene;
     scene.spectral.lambdaMin = 450;
     scene.spectral.lambdaMax = 750;
-    const int block = addMismatchedBlock(scene, sampleIndex, depth);
-    scene.media.emplace_back("layer", Spectrum::constant(0.0), Spectrum::constant(0.0), 0.0, sampleIndex, std::vector<DyeComponent>{{dye, molar}});
-    addMediumBox(scene, Vec3(-half, -half, -d / 2), Vec3(half, half, d / 2), static_cast<int>(scene.media.size()) - 1);
-    scene.shapes.back().outsideMedium = block;
+    const int block = addMismatchedBlock(scene, sampleIndex, 0.02);  // the top 20 µm above the focus
+    addDyeLayer(scene, layer, block, 0.0, 0.0, 0.0, sampleIndex);
     const auto sheet = addLayerSheet(scene, sampleIndex);
     scene.finalize();
 
@@ -89,7 +86,7 @@ TEST_P(MismatchedLayer, KeepsThePhotonBudgetWithTheSampleConeAndFresnel) {
 
     const double collection = collectionFraction(sampleIndex, objective.na);
     const int size = 12;
-    double expected = layerElectrons(DyeLayer{dye, molar, d, half}, *sheet, 488.0, filter, LayerCamera{6.5e-3 / 16, size, 0.01, 0.8, collection}, true);
+    double expected = layerElectrons(layer, *sheet, 488.0, filter, LayerCamera{6.5e-3 / 16, size, 0.01, 0.8, collection}, true);
     // The model PSF is cut at vCut; what the aberrated PSF holds within it (the layer is uniform, so only the
     // cut is missing from the field) is the model's own Parseval-normalised table (widefield_psf_test).
     optics::AcquireOptions o;
@@ -97,6 +94,7 @@ TEST_P(MismatchedLayer, KeepsThePhotonBudgetWithTheSampleConeAndFresnel) {
     optics::FocalPlane focus;
     const auto psf = optics::makePsf(scene, objective, focus, 650, o.psf);
     double enclosed = 0;
+    const double d = layer.thicknessMm;
     for (int k = 0; k < 20; ++k) enclosed += psf->enclosed(-d / 2 + (k + 0.5) * d / 20, 650) / 20;
     expected *= enclosed;
 

@@ -26,15 +26,12 @@ namespace {
 using namespace testing;
 
 TEST(PhotonBudget, ThinDyeLayerUnderKnownSheetMatchesTheClosedFormChain) {
-    const double molar = 1e-4, d = 0.001, half = 0.05;  // 100 µM, 1 µm thick, 0.1 mm wide
-    const Fluorophore dye = separatedBandDye(70000, 0.9);
+    const DyeLayer layer{separatedBandDye(70000, 0.9), 1e-4, 0.001, 0.05};  // 100 µM, 1 µm thick, 0.1 mm wide
     Scene scene;
     scene.spectral.lambdaMin = 450;
     scene.spectral.lambdaMax = 750;
     scene.media.emplace_back("water", Spectrum::constant(0.0), Spectrum::constant(0.0), 0.0, 1.33);
-    scene.media.emplace_back("layer", Spectrum::constant(0.0), Spectrum::constant(0.0), 0.0, 1.33, std::vector<DyeComponent>{{dye, molar}});
-    addMediumBox(scene, Vec3(-half, -half, -d / 2), Vec3(half, half, d / 2), 1);
-    scene.shapes.back().outsideMedium = 0;
+    addDyeLayer(scene, layer, 0, 0.0, 0.0, 0.0, 1.33);
     addBath(scene, 0.4, 0);
     const auto sheet = addLayerSheet(scene, 1.33);
     scene.camera.medium = 0;
@@ -58,7 +55,7 @@ TEST(PhotonBudget, ThinDyeLayerUnderKnownSheetMatchesTheClosedFormChain) {
     const optics::PlaneImage r = optics::renderPlane(scene, objective, optics::FocalPlane{}, filter, detector, 16, 16, o);
 
     const double collection = (1 - std::cos(objective.collectionHalfAngle())) / 2;
-    double expected = layerElectrons(DyeLayer{dye, molar, d, half}, *sheet, 488.0, filter, LayerCamera{6.5e-3 / 16, 16, 0.01, 0.8, collection}, true);
+    double expected = layerElectrons(layer, *sheet, 488.0, filter, LayerCamera{6.5e-3 / 16, 16, 0.01, 0.8, collection}, true);
     double measured = 0, var = 0;
     for (size_t i = 0; i < r.electrons.size(); ++i) {
         measured += r.electrons[i];

@@ -10,6 +10,7 @@
 #include "optics/light_sheet.h"
 #include "scene/beam.h"
 #include "scene/scene.h"
+#include "support/fluorescent_scenes.h"
 
 namespace fluorosim::testing {
 
@@ -27,6 +28,18 @@ struct LayerCamera {
     double qe = 0.8;
     double collection = 0;  // the fraction of 4π the objective collects (with whatever Fresnel loss applies)
 };
+
+// The layer as a box (2 halfWidth wide, centred on the focal plane) of a medium holding its dye at
+// `molar` over constant coefficients (1/mm) and index, inside medium `outside`. Returns the layer's medium.
+inline int addDyeLayer(Scene& scene, const DyeLayer& layer, int outside, double sigmaA, double sigmaS, double g, double ior) {
+    scene.media.emplace_back("layer", Spectrum::constant(sigmaA), Spectrum::constant(sigmaS), g, ior,
+                             std::vector<DyeComponent>{{layer.dye, layer.molar}});
+    const int medium = static_cast<int>(scene.media.size()) - 1;
+    const double h = layer.halfWidthMm, d = layer.thicknessMm;
+    addMediumBox(scene, Vec3(-h, -h, -d / 2), Vec3(h, h, d / 2), medium);
+    scene.shapes.back().outsideMedium = outside;
+    return medium;
+}
 
 // The layer's sheet: 488 nm, 1 mW, a waist of 10 µm (ten times the layer: nearly flat across it; the
 // closed form integrates it exactly), 1 mm high, in a medium of `index`; added to the scene's lights.
