@@ -24,7 +24,40 @@ struct AcquireRequest {
     std::optional<int64_t> seed;
     int threads = 0;
     std::vector<std::string> channels;  // names to acquire (default: all)
+    std::optional<std::string> exposure;  // a time ("20 ms"), or "auto" / "auto:F" (autoExpose at F of the full well, 0.5 by default)
 };
+
+// --exposure: a time replaces the scene's; "auto[:F]" asks for autoExpose after the stack is acquired.
+struct ExposureRequest {
+    std::optional<double> seconds;
+    std::optional<double> autoFraction;
+};
+
+inline ExposureRequest parseExposure(const std::optional<std::string>& text) {
+    ExposureRequest r;
+    if (!text) return r;
+    if (text->rfind("auto", 0) == 0) {
+        const std::string rest = text->substr(4);
+        if (rest.empty()) r.autoFraction = 0.5;
+        else {
+            double f = 0;
+            size_t used = 0;
+            try {
+                if (rest[0] == ':') f = std::stod(rest.substr(1), &used);
+            } catch (const std::exception&) {
+                used = 0;
+            }
+            if (rest[0] != ':' || used == 0 || used != rest.size() - 1 || !(f > 0 && f <= 1))
+                throw ConfigError("--exposure: expected a time (\"20 ms\"), \"auto\" or \"auto:F\" with F the full-well fraction in (0, 1], got \"" +
+                                  *text + "\"");
+            r.autoFraction = f;
+        }
+        return r;
+    }
+    r.seconds = parseQuantity(*text, Dimension::Time, "--exposure");
+    if (!(*r.seconds > 0) || !std::isfinite(*r.seconds)) throw ConfigError("--exposure: must be positive, got \"" + *text + "\"");
+    return r;
+}
 
 // What can be checked before the scene is read (so that a typo is refused before loading and its warnings).
 inline void checkAcquireRequest(const AcquireRequest& a) {
@@ -36,6 +69,7 @@ inline void checkAcquireRequest(const AcquireRequest& a) {
     if (!estimatorFromName(a.estimator)) throw ConfigError("--estimator: expected \"split\" or \"path\", got \"" + a.estimator + "\"");
     if (a.noiseRatio && (!(*a.noiseRatio > 0) || !std::isfinite(*a.noiseRatio)))
         throw ConfigError("--noise-ratio: must be positive and finite, got " + std::to_string(*a.noiseRatio));
+    parseExposure(a.exposure);
 }
 
 // The stack overrides (planes, step) of acquire and fit, applied to `m` and validated against the scene.
@@ -54,6 +88,7 @@ inline void applyStackOverrides(Microscope& m, const Scene& scene, std::optional
 inline AcquireOptions applyAcquireRequest(const AcquireRequest& a, const Scene& scene, Microscope& m) {
     checkAcquireRequest(a);
     applyStackOverrides(m, scene, a.planes, a.step);
+    if (const ExposureRequest e = parseExposure(a.exposure); e.seconds) m.detector.exposureS = *e.seconds;
 
     AcquireOptions o;
     o.spp = a.spp.value_or(scene.render.spp);

@@ -200,7 +200,7 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                       const AcquireOptions& o, const ChannelImaging& channel) {
     const auto start = std::chrono::steady_clock::now();
     const WavelengthSampler wavelengths = cameraWavelengthSampler(scene, tracer.lights(), tracer.fluorescence().active());
-    const Imaging imaging(objective, focus, detector, width, height, channel.psf);
+    const Imaging imaging(objective, focus, detector, width, height, channel.psfAt(focus));
     const WidefieldPsf& psf = imaging.psf();
     const auto detection = detectionOf(emission, detector);
     const UnscatteredModel* model = o.estimator == Estimator::Split && channel.unscattered && channel.unscattered->active()
@@ -425,15 +425,32 @@ ChannelImaging setUpChannelImaging(const Scene& scene, const std::vector<Light>&
                                    const Filter& emission, const DetectorOptions& detector, int width, int height, const AcquireOptions& o,
                                    std::vector<double> planeOffsetsMm, bool labels) {
     checkPlaneArguments(objective, focus, detector, width, height, o);
+    if (planeOffsetsMm.empty()) throw ConfigError("a channel's imaging needs at least one plane");
     ChannelImaging c;
-    c.psf = makePsf(scene, objective, focus, emissionCentreNm(emission, scene), o.psf);
+    c.focusMm = focus.centreMm;
+    c.axis = normalize(focus.towardObjective);
+    c.planeOffsetsMm = planeOffsetsMm;
+    c.planePsfs = makePlanePsfs(scene, objective, focus, planeOffsetsMm, emissionCentreNm(emission, scene), o.psf);
+    size_t nearest = 0;
+    for (size_t i = 1; i < planeOffsetsMm.size(); ++i)
+        if (std::abs(planeOffsetsMm[i]) < std::abs(planeOffsetsMm[nearest])) nearest = i;
+    c.psf = c.planePsfs[nearest];
     if (o.estimator == Estimator::Split) {
         const FluorescencePlan plan(scene, lights);
         const Imaging imaging(objective, focus, detector, width, height, c.psf);
         c.unscattered = std::make_shared<const UnscatteredModel>(scene, lights, plan, imaging, detectionOf(emission, detector), o.unscattered,
-                                                                 std::move(planeOffsetsMm), labels);
+                                                                 std::move(planeOffsetsMm), labels, c.planePsfs);
     }
     return c;
+}
+
+const std::shared_ptr<const WidefieldPsf>& ChannelImaging::psfAt(const FocalPlane& focus) const {
+    const Vec3 d = focus.centreMm - focusMm;
+    const double offset = dot(d, axis);
+    if (length(d - axis * offset) <= 1e-9)
+        for (size_t i = 0; i < planeOffsetsMm.size(); ++i)
+            if (std::abs(planeOffsetsMm[i] - offset) <= 1e-9) return planePsfs[i];
+    return psf;
 }
 
 PlaneImage renderPlane(const Scene& scene, std::vector<Light> lights, const ObjectiveOptions& objective, const FocalPlane& focus,
@@ -514,6 +531,45 @@ void storePlane(Stack& stack, const Microscope& m, size_t slot, int plane, const
         stack.counts[off + i] = frame[i];
     }
     stack.done[stack.index(slot, plane)] = true;
+}
+
+AutoExposure autoExpose(Stack& stack, Microscope& m, double fraction, uint64_t seed) {
+    if (!(fraction > 0 && fraction <= 1)) throw ConfigError("--exposure auto: the full-well fraction must lie in (0, 1], got " + std::to_string(fraction));
+    const double dark = m.detector.darkCurrentElectronsPerS * m.detector.exposureS;
+    double reliable = 0, any = 0;
+    for (size_t slot = 0; slot < stack.channels.size(); ++slot)
+        for (int k = 0; k < stack.planes; ++k) {
+            if (!stack.done[stack.index(slot, k)]) continue;
+            const size_t off = stack.pixelOffset(slot, k);
+            for (size_t i = 0; i < static_cast<size_t>(stack.width) * stack.height; ++i) {
+                const double signal = stack.expected[off + i] - dark;
+                any = std::max(any, signal);
+                if (stack.stderrElectrons[off + i] <= 0.25 * signal) reliable = std::max(reliable, signal);
+            }
+        }
+    AutoExposure a;
+    a.fraction = fraction;
+    a.brightestElectrons = reliable > 0 ? reliable : any;
+    if (!(a.brightestElectrons > 0)) throw ConfigError("--exposure auto: the stack holds no signal to set the exposure by");
+    a.factor = fraction * m.detector.fullWellElectrons / a.brightestElectrons;
+    a.exposureS = m.detector.exposureS * a.factor;
+    m.detector.exposureS = a.exposureS;
+    const Detector camera(m.detector);
+    for (size_t slot = 0; slot < stack.channels.size(); ++slot)
+        for (int k = 0; k < stack.planes; ++k) {
+            if (!stack.done[stack.index(slot, k)]) continue;
+            const size_t off = stack.pixelOffset(slot, k), n = static_cast<size_t>(stack.width) * stack.height;
+            std::vector<double> signal(n);
+            for (size_t i = 0; i < n; ++i) signal[i] = (stack.expected[off + i] - dark) * a.factor;
+            const std::vector<double> withDark = camera.expectedElectrons(signal);
+            const std::vector<uint16_t> frame = camera.readOut(withDark, seed, planeStreamKey(m.channels[stack.channels[slot]].name, k));
+            for (size_t i = 0; i < n; ++i) {
+                stack.expected[off + i] = static_cast<float>(withDark[i]);
+                stack.stderrElectrons[off + i] = static_cast<float>(stack.stderrElectrons[off + i] * a.factor);
+                stack.counts[off + i] = frame[i];
+            }
+        }
+    return a;
 }
 
 bool acquireStack(const Scene& scene, const Microscope& m, Stack& stack, const AcquireOptions& options, const StackCallbacks& cb) {

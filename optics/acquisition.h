@@ -89,11 +89,17 @@ struct PlaneImage {
 // the plane's index, so that acquiring one channel alone reproduces the full acquisition.
 uint64_t planeStreamKey(const std::string& channelName, int plane);
 
-// What the planes of one channel share: the PSF (pupil apodised at the stack's central plane) and the
-// computed part's model (built only for the split estimator, and null when nothing is computed).
+// What the planes of one channel share: the PSFs of its planes (makePlanePsfs: one per group of planes
+// whose pupils agree within the PSF's depth tolerance) and the computed part's model (built only for the
+// split estimator, and null when nothing is computed).
 struct ChannelImaging {
-    std::shared_ptr<const WidefieldPsf> psf;
+    std::shared_ptr<const WidefieldPsf> psf;  // at the plane nearest the reference focus
+    Vec3 focusMm, axis;                       // the reference focus and the axis toward the objective
+    std::vector<double> planeOffsetsMm;
+    std::vector<std::shared_ptr<const WidefieldPsf>> planePsfs;  // per plane offset
     std::shared_ptr<const UnscatteredModel> unscattered;
+    // The PSF of the stack's plane at `focus` (`psf` for a focus that is not one of its planes).
+    const std::shared_ptr<const WidefieldPsf>& psfAt(const FocalPlane& focus) const;
 };
 // Builds it for lights and a focal plane (any plane of the stack; the central one is used by acquireStack).
 // `planeOffsetsMm`: the stack's planes along the axis from `focus` (the computed part's lattice serves them all).
@@ -135,6 +141,21 @@ struct Stack {
 Stack emptyStack(const Microscope& microscope, std::vector<size_t> channels);
 // Stores a rendered plane: adds dark current, reads it out through the detector with its own stream.
 void storePlane(Stack& stack, const Microscope& microscope, size_t channelSlot, int plane, const PlaneImage& image, uint64_t seed);
+
+// The exposure chosen after the fact, as a careful experimenter sets it: every photoelectron scales with
+// the exposure (the sheets' energy and the dark current), so a stack acquired at one exposure is exactly
+// that stack at another, its planes re-read with their own noise streams. The brightest pixel is the
+// largest expected signal (dark excluded) among pixels whose standard error is at most a quarter of it,
+// so that a rare large Monte Carlo sample does not set the exposure (the plain largest if none is).
+struct AutoExposure {
+    double fraction = 0;            // of the full well, asked for
+    double factor = 0;              // new exposure / old
+    double exposureS = 0;           // the new exposure
+    double brightestElectrons = 0;  // the brightest pixel's expected signal before scaling
+};
+// Scales the done planes of `stack` and sets microscope.detector.exposureS. Throws ConfigError for a
+// fraction outside (0, 1] or a stack without signal.
+AutoExposure autoExpose(Stack& stack, Microscope& microscope, double fraction, uint64_t seed);
 
 struct StackCallbacks {
     std::function<void(double)> progress;  // fraction of the whole stack

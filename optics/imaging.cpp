@@ -85,8 +85,7 @@ SampledSpectrum Imaging::firstVertexWeight(const Vec3& pixelPoint, const Vec3& y
     return w;
 }
 
-std::shared_ptr<const WidefieldPsf> makePsf(const Scene& scene, const ObjectiveOptions& objective, const FocalPlane& focus, double emissionNm,
-                                            const PsfTableOptions& table) {
+PupilOptions pupilAt(const Scene& scene, const ObjectiveOptions& objective, const FocalPlane& focus, double emissionNm) {
     objective.validate();
     focus.validate();
     const Vec3 axis = normalize(focus.towardObjective);
@@ -128,11 +127,45 @@ std::shared_ptr<const WidefieldPsf> makePsf(const Scene& scene, const ObjectiveO
         for (double& a : apodization) a = std::clamp(a / axial, 0.0, 1.0);
         pupil.intensityApodization = std::move(apodization);
     }
+    return pupil;
+}
+
+namespace {
+
+std::shared_ptr<const WidefieldPsf> psfOf(const PupilOptions& pupil, double emissionNm, const PsfTableOptions& table) {
     // Under a mismatch the pupil's phase does not scale with λ: tables at nodes across the emission.
     std::vector<double> nodes;
     if (pupil.sampleIndex != pupil.immersionIndex)
         for (int k = -2; k <= 2; ++k) nodes.push_back(emissionNm + 30.0 * k);
     return std::make_shared<const WidefieldPsf>(pupil, table, nodes);
+}
+
+}  // namespace
+
+std::shared_ptr<const WidefieldPsf> makePsf(const Scene& scene, const ObjectiveOptions& objective, const FocalPlane& focus, double emissionNm,
+                                            const PsfTableOptions& table) {
+    return psfOf(pupilAt(scene, objective, focus, emissionNm), emissionNm, table);
+}
+
+std::vector<std::shared_ptr<const WidefieldPsf>> makePlanePsfs(const Scene& scene, const ObjectiveOptions& objective, const FocalPlane& focus,
+                                                               const std::vector<double>& planeOffsetsMm, double emissionNm,
+                                                               const PsfTableOptions& table) {
+    table.validate();
+    std::vector<size_t> order(planeOffsetsMm.size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return planeOffsetsMm[a] < planeOffsetsMm[b]; });
+    std::vector<std::shared_ptr<const WidefieldPsf>> out(planeOffsetsMm.size());
+    const Vec3 axis = normalize(focus.towardObjective);
+    std::shared_ptr<const WidefieldPsf> current;
+    for (size_t i : order) {
+        FocalPlane plane = focus;
+        plane.centreMm = focus.centreMm + axis * planeOffsetsMm[i];
+        const PupilOptions pupil = pupilAt(scene, objective, plane, emissionNm);
+        const bool sameSample = current && current->pupil().sampleIndex == pupil.sampleIndex;  // a plane in another medium starts a group
+        if (!sameSample || pupilDistance(current->pupil(), pupil, emissionNm) > table.depthTolerance) current = psfOf(pupil, emissionNm, table);
+        out[i] = current;
+    }
+    return out;
 }
 
 }  // namespace fluorosim::optics

@@ -97,5 +97,15 @@ private:
 // `emissionNm` along the camera rays (relative to the axial ray; 16 angles, 8 azimuths).
 std::shared_ptr<const WidefieldPsf> makePsf(const Scene& scene, const ObjectiveOptions& objective, const FocalPlane& focus, double emissionNm,
                                             const PsfTableOptions& table);
+// The pupil makePsf builds its PSF from.
+PupilOptions pupilAt(const Scene& scene, const ObjectiveOptions& objective, const FocalPlane& focus, double emissionNm);
+
+// The PSFs of a stack's planes (`focus` moved by each offset along its axis toward the objective): planes
+// share one PSF while their pupils lie within `table.depthTolerance` (pupilDistance, at `emissionNm`) of
+// the first plane of their group, in the order of their offsets. Under an index mismatch the focus's depth changes
+// the Gibson–Lanni aberration; in any sample the depth changes the apodisation.
+std::vector<std::shared_ptr<const WidefieldPsf>> makePlanePsfs(const Scene& scene, const ObjectiveOptions& objective, const FocalPlane& focus,
+                                                               const std::vector<double>& planeOffsetsMm, double emissionNm,
+                                                               const PsfTableOptions& table);
 
 }  // namespace fluorosim::optics

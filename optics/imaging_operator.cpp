@@ -282,7 +282,7 @@ SparseColumns StackOperator::columns(const ParameterMap& map, const std::atomic<
                         ems.push_back(em);
                     }
                 if (ems.empty()) continue;
-                const std::vector<std::vector<double>> images = ch.imaging.unscattered->projector().project(ems, static_cast<int>(b1 - b0), threads_, cancel);
+                const std::vector<std::vector<double>> images = ch.imaging.unscattered->projector(offsets_[static_cast<size_t>(k)]).project(ems, static_cast<int>(b1 - b0), threads_, cancel);
                 if (images.empty()) throw Cancelled("cancelled while computing the fit's columns");
                 for (size_t j = b0; j < b1; ++j) {
                     const std::vector<double>& img = images[j - b0];
@@ -325,7 +325,7 @@ std::vector<double> StackOperator::apply(const ParameterMap& map, const std::vec
                 }
                 terms.emissions[i].e *= c;
             }
-            const std::vector<std::vector<double>> images = ch.imaging.unscattered->projector().project(terms.emissions, 1, threads_);
+            const std::vector<std::vector<double>> images = ch.imaging.unscattered->projector(offsets_[static_cast<size_t>(k)]).project(terms.emissions, 1, threads_);
             std::copy(images[0].begin(), images[0].end(), y.begin() + static_cast<std::ptrdiff_t>(planeImage(slot, k) * planePixels));
             projectionSeconds_ += secondsSince(start);
             ++projections_;
@@ -348,7 +348,7 @@ std::vector<double> StackOperator::applyAdjoint(const ParameterMap& map, const s
                                                 offsets_[static_cast<size_t>(k)], map, threads_);
             const std::vector<double> image(y.begin() + static_cast<std::ptrdiff_t>(planeImage(slot, k) * planePixels),
                                             y.begin() + static_cast<std::ptrdiff_t>((planeImage(slot, k) + 1) * planePixels));
-            const std::vector<double> sensitivity = ch.imaging.unscattered->projector().backProject(image, terms.emissions, threads_);
+            const std::vector<double> sensitivity = ch.imaging.unscattered->projector(offsets_[static_cast<size_t>(k)]).backProject(image, terms.emissions, threads_);
             for (size_t i = 0; i < terms.emissions.size(); ++i)
                 for (uint32_t e = terms.entryStart[i]; e < terms.entryStart[i + 1]; ++e) {
                     const ParameterMap::Entry& en = terms.entries[e];

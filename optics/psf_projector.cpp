@@ -7,6 +7,7 @@
 #include <numeric>
 
 #include "core/errors.h"
+#include "core/math.h"
 #include "core/parallel.h"
 #include "core/quadrature.h"
 #include "optics/fft_convolution.h"
@@ -86,11 +87,24 @@ struct PsfProjector::Impl {
     mutable std::vector<PhaseKernel> kernels;  // [(dye × layers + layer) F² + phaseY F + phaseX]
     mutable std::unique_ptr<std::once_flag[]> kernelBuilt;
     mutable std::atomic<int64_t> kernelNanoseconds{0};
-    std::unique_ptr<FftConvolution> far;  // one kernel per bin
+    std::unique_ptr<FftConvolution> far;  // one kernel per dye and bin: dye × bins + bin
     int farRadius = 0;
+    std::unique_ptr<FftConvolution> tail;  // on blocks, one kernel per dye and bin, like the far part
+    int tailWidth = 0, tailHeight = 0;     // the region in blocks
     int reach = 0;
 
     int regionWidth() const { return g.width + 2 * g.marginPixels; }
+    // Bilinear weights of a position x (pixels from the region's edge) on the block centres (B/2 + i B),
+    // clamped at the edges: f(i, weight) twice.
+    template <class F>
+    void blockWeights(double x, int blocks, F&& f) const {
+        const double c = x / o.tailBlockPixels - 0.5;
+        const int i = static_cast<int>(std::floor(c));
+        const double t = c - i;
+        f(std::clamp(i, 0, blocks - 1), 1 - t);
+        f(std::clamp(i + 1, 0, blocks - 1), t);
+    }
+    size_t farIndex(uint32_t dye, int layer) const { return static_cast<size_t>(dye) * static_cast<size_t>(bins) + static_cast<size_t>(layerBin[static_cast<size_t>(layer)]); }
     int regionHeight() const { return g.height + 2 * g.marginPixels; }
     double layerDz(int l) const { return (l - 0.5 * g.layers + 0.5) * g.axialMm; }
     double taperMm() const { return o.nearTaperPixels * g.pixelMm; }
@@ -211,27 +225,74 @@ PsfProjector::PsfProjector(const ChannelDyes& dyes, std::shared_ptr<const Widefi
     m.kernelBuilt = std::make_unique<std::once_flag[]>(m.kernels.size());
     for (double r : m.splitInnerMm) m.reach = std::max(m.reach, static_cast<int>(std::ceil((r + m.taperMm()) / m.g.pixelMm)) + 2);
 
-    // Far kernels: the detected-mass mean of the dyes' PSFs beyond the split, for a point at a pixel
-    // centre, one per bin.
+    // Far kernels: each dye's polychromatic PSF beyond the split, for a point at a pixel centre, one per
+    // dye and bin (the FFTs of a dye that emits nowhere in a bin are skipped).
     m.farRadius = static_cast<int>(std::ceil(cutMm / m.g.pixelMm)) + 2;
     m.far = std::make_unique<FftConvolution>(m.regionWidth(), m.regionHeight(), m.farRadius);
-    std::vector<double> meanLambda, meanWeight;
-    double meanTotal = 0;
-    for (const EmittingDye& t : m.dyes) meanTotal += t.detected;
-    for (const EmittingDye& t : m.dyes)
-        for (size_t q = 0; q < t.nodeLambda.size(); ++q) {
-            meanLambda.push_back(t.nodeLambda[q]);
-            meanWeight.push_back(t.nodeWeight[q] * t.detected / meanTotal);
-        }
     const QuadratureRule q = gaussLegendre01(m.pixelNodes);
     const int side = 2 * m.farRadius + 1;
-    for (int b = 0; b < m.bins; ++b) {
-        const double dz = -m.halfDepthMm + (b + 0.5) * binMm;
-        const RadialTable radial((m.farRadius + 2) * m.g.pixelMm * std::sqrt(2.0), m.g.pixelMm / 16,
-                                 [&](double r) { return m.profile(meanLambda, meanWeight, r, dz) * (1 - m.splitWeight(b, r)); });
-        std::vector<float> k(static_cast<size_t>(side) * side);
-        integratePixels(radial, 0.5, 0.5, m.farRadius, q, m.g.pixelMm, k.data());
-        m.far->addKernel(std::vector<double>(k.begin(), k.end()));
+    for (const EmittingDye& t : m.dyes)
+        for (int b = 0; b < m.bins; ++b) {
+            const double dz = -m.halfDepthMm + (b + 0.5) * binMm;
+            const RadialTable radial((m.farRadius + 2) * m.g.pixelMm * std::sqrt(2.0), m.g.pixelMm / 16,
+                                     [&](double r) { return m.profile(t.nodeLambda, t.nodeWeight, r, dz) * (1 - m.splitWeight(b, r)); });
+            std::vector<float> k(static_cast<size_t>(side) * side);
+            integratePixels(radial, 0.5, 0.5, m.farRadius, q, m.g.pixelMm, k.data());
+            m.far->addKernel(std::vector<double>(k.begin(), k.end()));
+        }
+
+    // Tail kernels: per dye and bin, the light beyond the table's cut, (1 − enclosed) vCut / (2π v³) per
+    // unit v-area at each wavelength node, integrated over each block (a source at a block's centre).
+    if (m.o.tailBlockPixels > 0) {
+        const int B = m.o.tailBlockPixels;
+        m.tailWidth = (m.regionWidth() + B - 1) / B;
+        m.tailHeight = (m.regionHeight() + B - 1) / B;
+        const int tailRadius = static_cast<int>(std::ceil(std::hypot(m.tailWidth, m.tailHeight))) + 1;
+        m.tail = std::make_unique<FftConvolution>(m.tailWidth, m.tailHeight, tailRadius);
+        const double blockMm = B * m.g.pixelMm, vCut = m.psf->table().vCut;
+        const int tside = 2 * tailRadius + 1;
+        double cutMin = 1e300, cutMax = 0;  // the cut radii over the dyes' nodes
+        for (const EmittingDye& t : m.dyes)
+            for (double l : t.nodeLambda) {
+                cutMin = std::min(cutMin, m.psf->cutRadiusMm(l));
+                cutMax = std::max(cutMax, m.psf->cutRadiusMm(l));
+            }
+        for (const EmittingDye& t : m.dyes)
+            for (int b = 0; b < m.bins; ++b) {
+                const double dz = -m.halfDepthMm + (b + 0.5) * binMm;
+                std::vector<double> kna(t.nodeLambda.size()), amplitude(t.nodeLambda.size());
+                for (size_t n = 0; n < t.nodeLambda.size(); ++n) {
+                    kna[n] = 2 * kPi / (t.nodeLambda[n] * 1e-6) * m.psf->pupil().na;
+                    amplitude[n] = t.nodeWeight[n] * std::max(0.0, 1 - m.psf->enclosed(dz, t.nodeLambda[n])) * vCut / (2 * kPi);
+                }
+                const RadialTable density((tailRadius + 2) * blockMm * std::sqrt(2.0), m.g.pixelMm / 8, [&](double r) {
+                    double d = 0;
+                    for (size_t n = 0; n < kna.size(); ++n) {
+                        const double v = kna[n] * r;
+                        if (v > vCut) d += amplitude[n] * kna[n] * kna[n] / (v * v * v);
+                    }
+                    return d;
+                });
+                std::vector<double> k(static_cast<size_t>(tside) * tside, 0.0);
+                parallelFor(static_cast<size_t>(tside), 0, [&](size_t row) {
+                    const int dy = static_cast<int>(row) - tailRadius;
+                    for (int dx = -tailRadius; dx <= tailRadius; ++dx) {
+                        // Nothing within the cut; midpoint nodes 2 per pixel where a block straddles it, 4 per block
+                        // where 1/r³ is smooth (a block's corners lie within 0.71 blocks of its centre).
+                        const double d = std::sqrt(double(dx * dx + dy * dy));
+                        if ((d + 0.75) * blockMm < cutMin) continue;
+                        const int sub = (d - 0.75) * blockMm <= cutMax ? 2 * B : 4;
+                        double sum = 0;
+                        for (int a = 0; a < sub; ++a)
+                            for (int c = 0; c < sub; ++c) {
+                                const double x = (dx + (a + 0.5) / sub - 0.5) * blockMm, y = (dy + (c + 0.5) / sub - 0.5) * blockMm;
+                                sum += density(std::sqrt(x * x + y * y));
+                            }
+                        k[static_cast<size_t>(dy + tailRadius) * tside + static_cast<size_t>(dx + tailRadius)] = sum * sqr(blockMm / sub);
+                    }
+                });
+                m.tail->addKernel(k);
+            }
     }
 }
 
@@ -258,11 +319,12 @@ std::vector<std::vector<double>> PsfProjector::project(const std::vector<PointEm
     const int batch = std::max(1, std::min(targets, 8));
     for (int t0 = 0; t0 < targets; t0 += batch) {
         const int t1 = std::min(targets, t0 + batch);
-        std::vector<std::vector<std::vector<double>>> farBins(static_cast<size_t>(t1 - t0), std::vector<std::vector<double>>(static_cast<size_t>(m.bins)));
+        const size_t farCount = static_cast<size_t>(m.far->kernelCount());
+        std::vector<std::vector<std::vector<double>>> farBins(static_cast<size_t>(t1 - t0), std::vector<std::vector<double>>(farCount));
         for (const PointEmission& em : emissions) {
             if (static_cast<int>(em.target) < t0 || static_cast<int>(em.target) >= t1 || !(em.e != 0)) continue;
             m.forEachPiece(em, [&](int layer, int64_t, int64_t, double) {
-                std::vector<double>& bin = farBins[static_cast<size_t>(static_cast<int>(em.target) - t0)][static_cast<size_t>(m.layerBin[static_cast<size_t>(layer)])];
+                std::vector<double>& bin = farBins[static_cast<size_t>(static_cast<int>(em.target) - t0)][m.farIndex(em.dye, layer)];
                 if (bin.empty()) bin.assign(static_cast<size_t>(W) * H, 0.0);
             });
         }
@@ -293,7 +355,7 @@ std::vector<std::vector<double>> PsfProjector::project(const std::vector<PointEm
                     const double cu = double(qu) / F - 0.5, cv = double(qv) / F - 0.5;
                     const int64_t cx = static_cast<int64_t>(std::floor(cu)), cy = static_cast<int64_t>(std::floor(cv));
                     const double gx = cu - static_cast<double>(cx), gy = cv - static_cast<double>(cy);
-                    std::vector<double>& bin = bins[static_cast<size_t>(m.layerBin[static_cast<size_t>(layer)])];
+                    std::vector<double>& bin = bins[m.farIndex(em.dye, layer)];
                     for (int q = 0; q < 4; ++q) {
                         const int64_t x = cx + (q & 1), y = cy + ((q >> 1) & 1);
                         if (x < 0 || x >= W || y < y0 || y >= y1) continue;
@@ -303,12 +365,45 @@ std::vector<std::vector<double>> PsfProjector::project(const std::vector<PointEm
             }
         });
         if (cancel && cancel->load()) return {};
+        // The tail's block deposits (serial: a block spans several bands).
+        std::vector<std::vector<std::vector<double>>> tailBins(static_cast<size_t>(t1 - t0));
+        if (m.tail) {
+            const size_t blocks = static_cast<size_t>(m.tailWidth) * m.tailHeight;
+            for (auto& bins : tailBins) bins.resize(farCount);
+            for (const PointEmission& em : emissions) {
+                if (static_cast<int>(em.target) < t0 || static_cast<int>(em.target) >= t1 || !(em.e != 0)) continue;
+                auto& bins = tailBins[static_cast<size_t>(static_cast<int>(em.target) - t0)];
+                m.forEachPiece(em, [&](int layer, int64_t qu, int64_t qv, double wc) {
+                    std::vector<double>& bin = bins[m.farIndex(em.dye, layer)];
+                    if (bin.empty()) bin.assign(blocks, 0.0);
+                    m.blockWeights(double(qv) / F, m.tailHeight, [&](int j, double wy) {
+                        m.blockWeights(double(qu) / F, m.tailWidth, [&](int i, double wx) {
+                            bin[static_cast<size_t>(j) * m.tailWidth + static_cast<size_t>(i)] += em.e * wc * wx * wy;
+                        });
+                    });
+                });
+            }
+        }
         parallelFor(static_cast<size_t>(t1 - t0), threads, [&](size_t ti) {
             const std::vector<double> farImage = m.far->convolveSum(farBins[ti]);
             std::vector<double>& image = out[static_cast<size_t>(t0) + ti];
             for (int y = 0; y < height; ++y)
                 for (int x = 0; x < width; ++x)
                     image[static_cast<size_t>(y) * width + x] += farImage[static_cast<size_t>(y + margin) * W + static_cast<size_t>(x + margin)];
+            if (!m.tail) return;
+            // Each block holds the tail's photoelectrons over its B² pixels: interpolated bilinearly per pixel.
+            const std::vector<double> tailImage = m.tail->convolveSum(tailBins[ti]);
+            const double perPixel = 1.0 / sqr(static_cast<double>(m.o.tailBlockPixels));
+            for (int y = 0; y < height; ++y)
+                for (int x = 0; x < width; ++x) {
+                    double sum = 0;
+                    m.blockWeights(y + margin + 0.5, m.tailHeight, [&](int j, double wy) {
+                        m.blockWeights(x + margin + 0.5, m.tailWidth, [&](int i, double wx) {
+                            sum += wx * wy * tailImage[static_cast<size_t>(j) * m.tailWidth + static_cast<size_t>(i)];
+                        });
+                    });
+                    image[static_cast<size_t>(y) * width + x] += sum * perPixel;
+                }
         });
     }
     return out;
@@ -325,13 +420,32 @@ std::vector<double> PsfProjector::backProject(const std::vector<double>& image, 
     std::vector<double> region(static_cast<size_t>(W) * H, 0.0);
     for (int y = 0; y < height; ++y)
         for (int x = 0; x < width; ++x) region[static_cast<size_t>(y + margin) * W + static_cast<size_t>(x + margin)] = image[static_cast<size_t>(y) * width + x];
-    std::vector<uint8_t> binUsed(static_cast<size_t>(m.bins), 0);
+    const size_t farCount = static_cast<size_t>(m.far->kernelCount());
+    std::vector<uint8_t> binUsed(farCount, 0);
     for (const PointEmission& em : emissions)
-        m.forEachPiece(em, [&](int layer, int64_t, int64_t, double) { binUsed[static_cast<size_t>(m.layerBin[static_cast<size_t>(layer)])] = 1; });
-    std::vector<std::vector<double>> farAdjoint(static_cast<size_t>(m.bins));
-    parallelFor(static_cast<size_t>(m.bins), threads, [&](size_t b) {
+        m.forEachPiece(em, [&](int layer, int64_t, int64_t, double) { binUsed[m.farIndex(em.dye, layer)] = 1; });
+    std::vector<std::vector<double>> farAdjoint(farCount);
+    parallelFor(farCount, threads, [&](size_t b) {
         if (binUsed[b]) farAdjoint[b] = m.far->correlate(region, static_cast<int>(b));
     });
+    // The tail's adjoint: the camera image gathered onto blocks (the transposed interpolation), correlated.
+    std::vector<std::vector<double>> tailAdjoint(farCount);
+    if (m.tail) {
+        std::vector<double> blocks(static_cast<size_t>(m.tailWidth) * m.tailHeight, 0.0);
+        const double perPixel = 1.0 / sqr(static_cast<double>(m.o.tailBlockPixels));
+        for (int y = 0; y < height; ++y)
+            for (int x = 0; x < width; ++x) {
+                const double value = image[static_cast<size_t>(y) * width + x] * perPixel;
+                m.blockWeights(y + margin + 0.5, m.tailHeight, [&](int j, double wy) {
+                    m.blockWeights(x + margin + 0.5, m.tailWidth, [&](int i, double wx) {
+                        blocks[static_cast<size_t>(j) * m.tailWidth + static_cast<size_t>(i)] += wx * wy * value;
+                    });
+                });
+            }
+        parallelFor(farCount, threads, [&](size_t b) {
+            if (binUsed[b]) tailAdjoint[b] = m.tail->correlate(blocks, static_cast<int>(b));
+        });
+    }
     std::vector<double> out(emissions.size(), 0.0);
     parallelFor(emissions.size(), threads, [&](size_t i) {
         const PointEmission& em = emissions[i];
@@ -351,14 +465,23 @@ std::vector<double> PsfProjector::backProject(const std::vector<double>& image, 
             const double cu = double(qu) / F - 0.5, cv = double(qv) / F - 0.5;
             const int64_t cx = static_cast<int64_t>(std::floor(cu)), cy = static_cast<int64_t>(std::floor(cv));
             const double gx = cu - static_cast<double>(cx), gy = cv - static_cast<double>(cy);
-            const std::vector<double>& adj = farAdjoint[static_cast<size_t>(m.layerBin[static_cast<size_t>(layer)])];
+            const std::vector<double>& adj = farAdjoint[m.farIndex(em.dye, layer)];
             double far = 0;
             for (int q = 0; q < 4; ++q) {
                 const int64_t x = cx + (q & 1), y = cy + ((q >> 1) & 1);
                 if (x < 0 || x >= W || y < 0 || y >= H) continue;
                 far += adj[static_cast<size_t>(y) * W + static_cast<size_t>(x)] * ((q & 1) ? gx : 1 - gx) * ((q & 2) ? gy : 1 - gy);
             }
-            sum += wc * (near + far);
+            double tail = 0;
+            if (m.tail) {
+                const std::vector<double>& adjTail = tailAdjoint[m.farIndex(em.dye, layer)];
+                m.blockWeights(double(qv) / F, m.tailHeight, [&](int j, double wy) {
+                    m.blockWeights(double(qu) / F, m.tailWidth, [&](int bx, double wx) {
+                        tail += wx * wy * adjTail[static_cast<size_t>(j) * m.tailWidth + static_cast<size_t>(bx)];
+                    });
+                });
+            }
+            sum += wc * (near + far + tail);
         });
         out[i] = sum;
     });

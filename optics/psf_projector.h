@@ -7,7 +7,11 @@
 //    a point between layers or phases is split linearly. They reach a few pixels beyond the defocus disc
 //    and hand over to the far part over a taper.
 //  - Far part: the rest of the PSF on the pixel grid by FFT convolution in axial bins of `farBinUm`, with
-//    bilinear deposits at pixel centres; one detected-mass mean PSF of the channel's dyes per bin.
+//    bilinear deposits at pixel centres; each dye's own polychromatic PSF per bin.
+//  - Tail: the light beyond the PSF table's cut (v > vCut; 0.42 % in focus), with its exact mass per
+//    plane 1 − enclosed(dz) (Parseval) and the diffraction tail's 1/v³ profile, by FFT convolution on
+//    blocks of `tailBlockPixels`, bilinear both ways, out to the whole region: light from the region's
+//    points reaches every camera pixel, and only the tail of dye beyond the region's margin is left out.
 // The adjoint gathers what the forward scatters (kernels) and correlates where it convolves (far part),
 // so ⟨P e, y⟩ = ⟨e, Pᵀ y⟩ to round-off (tests/optics/imaging_operator_test.cpp).
 #include <atomic>
@@ -25,6 +29,7 @@ struct ProjectorOptions {
     double farBinUm = 2;
     int nearPixels = 2;     // the exact part of each kernel reaches this far beyond the defocus disc
     int nearTaperPixels = 3;  // over which it hands over to the far part
+    int tailBlockPixels = 8;  // the tail's grid (0: the tail is left out)
 };
 
 // Where a point's emission lands for one plane: its place in the region image (pixel units, x right from

@@ -49,6 +49,7 @@ void UnscatteredOptions::validate() const {
     require(nearPixels >= 1 && nearPixels <= 64 && nearTaperPixels >= 1 && nearTaperPixels <= 64,
             "unscattered image: nearPixels and nearTaperPixels must lie in [1, 64], got " + std::to_string(nearPixels) + " and " +
                 std::to_string(nearTaperPixels));
+    require(tailBlockPixels >= 0 && tailBlockPixels <= 64, "unscattered image: tailBlockPixels must lie in [0, 64], got " + std::to_string(tailBlockPixels));
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -111,7 +112,8 @@ struct UnscatteredModel::Impl {
     std::vector<Light> lights;  // at the reference plane
     ChannelDyes dyes;
     LatticeGeometry geometry;
-    std::unique_ptr<PsfProjector> projector;
+    std::vector<std::unique_ptr<PsfProjector>> projectors;  // one per distinct PSF
+    std::vector<size_t> planeProjector;                     // per plane offset
     std::unique_ptr<Imaging> reference;
     bool labels = false;
     mutable std::mutex buildMutex;
@@ -125,10 +127,16 @@ struct UnscatteredModel::Impl {
 
 UnscatteredModel::UnscatteredModel(const Scene& scene, const std::vector<Light>& lights, const FluorescencePlan& plan, const Imaging& plane,
                                    std::function<double(double)> detection, UnscatteredOptions options, std::vector<double> planeOffsetsMm,
-                                   bool labels)
+                                   bool labels, std::vector<std::shared_ptr<const WidefieldPsf>> planePsfs)
     : impl_(std::make_unique<Impl>()) {
     options.validate();
     if (planeOffsetsMm.empty()) throw ConfigError("unscattered image: a stack needs at least one plane");
+    if (planePsfs.empty()) planePsfs.assign(planeOffsetsMm.size(), plane.sharedPsf());
+    if (planePsfs.size() != planeOffsetsMm.size())
+        throw ConfigError("unscattered image: " + std::to_string(planePsfs.size()) + " plane PSFs for " + std::to_string(planeOffsetsMm.size()) + " planes");
+    for (const auto& psf : planePsfs)
+        if (!psf || psf->pupil().na != plane.psf().pupil().na || psf->pupil().sampleIndex != plane.psf().pupil().sampleIndex)
+            throw ConfigError("unscattered image: every plane's PSF needs the reference's objective and sample medium");
     for (double o : planeOffsetsMm)
         if (!std::isfinite(o)) throw ConfigError("unscattered image: plane offsets must be finite");
     Impl& m = *impl_;
@@ -225,7 +233,15 @@ UnscatteredModel::UnscatteredModel(const Scene& scene, const std::vector<Light>&
     po.farBinUm = m.o.farBinUm;
     po.nearPixels = m.o.nearPixels;
     po.nearTaperPixels = m.o.nearTaperPixels;
-    m.projector = std::make_unique<PsfProjector>(m.dyes, plane.sharedPsf(), pg, pixelNodes, po);
+    po.tailBlockPixels = m.o.tailBlockPixels;
+    std::vector<const WidefieldPsf*> distinct;
+    for (const auto& planePsf : planePsfs) {
+        if (std::find(distinct.begin(), distinct.end(), planePsf.get()) == distinct.end()) {
+            distinct.push_back(planePsf.get());
+            m.projectors.push_back(std::make_unique<PsfProjector>(m.dyes, planePsf, pg, pixelNodes, po));
+        }
+        m.planeProjector.push_back(static_cast<size_t>(std::find(distinct.begin(), distinct.end(), planePsf.get()) - distinct.begin()));
+    }
 }
 
 UnscatteredModel::~UnscatteredModel() = default;
@@ -234,7 +250,14 @@ bool UnscatteredModel::active() const { return !impl_->dyes.empty(); }
 const UnscatteredOptions& UnscatteredModel::options() const { return impl_->o; }
 const ChannelDyes& UnscatteredModel::dyes() const { return impl_->dyes; }
 const LatticeGeometry& UnscatteredModel::geometry() const { return impl_->geometry; }
-const PsfProjector& UnscatteredModel::projector() const { return *impl_->projector; }
+const PsfProjector& UnscatteredModel::projector(double planeOffsetMm) const {
+    const Impl& m = *impl_;
+    if (m.projectors.empty()) throw ConfigError("unscattered image: the channel computes nothing, so it has no projector");
+    const std::vector<double>& offsets = m.geometry.planeOffsetsMm;
+    for (size_t i = 0; i < offsets.size(); ++i)
+        if (std::abs(offsets[i] - planeOffsetMm) <= 1e-9) return *m.projectors[m.planeProjector[i]];
+    throw ConfigError("unscattered image: no plane of the stack lies " + std::to_string(planeOffsetMm * kUmPerMm) + " um from the reference");
+}
 const std::vector<Light>& UnscatteredModel::referenceLights() const { return impl_->lights; }
 
 bool UnscatteredModel::covers(const Imaging& plane, const Vec3& y) const {
@@ -345,13 +368,14 @@ UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<L
     out.timings.gains = secondsSince(t);
     out.points = emissions.size();
     t = std::chrono::steady_clock::now();
-    const double kernelsBefore = model.projector().kernelSeconds();
-    std::vector<std::vector<double>> images = model.projector().project(emissions, 1, threads, cancel);
+    const PsfProjector& projector = model.projector(offset);
+    const double kernelsBefore = projector.kernelSeconds();
+    std::vector<std::vector<double>> images = projector.project(emissions, 1, threads, cancel);
     if (images.empty() || (cancel && cancel->load())) {
         out.complete = false;
         return out;
     }
-    out.timings.kernelThreadSeconds = model.projector().kernelSeconds() - kernelsBefore;
+    out.timings.kernelThreadSeconds = projector.kernelSeconds() - kernelsBefore;
     out.timings.projection = secondsSince(t);
     // The FFT leaves round-off of both signs (about 1e-16 of the largest value) where the far part is 0.
     for (size_t i = 0; i < out.electrons.size(); ++i) out.electrons[i] = std::max(0.0, images[0][i]);

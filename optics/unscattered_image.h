@@ -45,6 +45,7 @@ struct UnscatteredOptions {
     double farBinUm = 2;
     int nearPixels = 2;                 // the exact part of each kernel reaches this far beyond the defocus disc
     int nearTaperPixels = 3;            // over which it hands over to the far part
+    int tailBlockPixels = 8;            // the PSF's tail beyond its cut on blocks of this many pixels (0: left out)
     // Dyes whose photoelectrons per mol/L in the channel fall below this fraction of its most efficient
     // dye's are left out of the computed image (and, covered by it, of the paths' core emission too).
     double dropDyesBelow = 1e-5;
@@ -111,10 +112,11 @@ public:
     // here); `detection(λ)`: photoelectrons per joule at λ (emission path × QE × λ/hc); `reference`: the
     // reference plane's imaging (its geometry and PSF); `planeOffsetsMm`: the stack's planes along the
     // axis from the reference plane (the lattice's axial step divides their spacing when it is uniform);
-    // `labels`: split S by label (for fits).
+    // `labels`: split S by label (for fits); `planePsfs`: each plane's PSF, parallel to the offsets (empty:
+    // the reference's for every plane; planes sharing a PSF share its projector and kernels).
     UnscatteredModel(const Scene& scene, const std::vector<Light>& lights, const FluorescencePlan& plan, const Imaging& reference,
                      std::function<double(double)> detection, UnscatteredOptions options = {}, std::vector<double> planeOffsetsMm = {0.0},
-                     bool labels = false);
+                     bool labels = false, std::vector<std::shared_ptr<const WidefieldPsf>> planePsfs = {});
     ~UnscatteredModel();
 
     // False when no beam line excites an emitting dye (the image is then zero and covers nothing).
@@ -125,7 +127,7 @@ public:
     const UnscatteredOptions& options() const;
     const ChannelDyes& dyes() const;
     const LatticeGeometry& geometry() const;
-    const PsfProjector& projector() const;
+    const PsfProjector& projector(double planeOffsetMm) const;  // the projector of the stack's plane at that offset
     // The plane's offset along the axis from the reference plane; ConfigError unless `plane` is the
     // reference plane moved along the axis to one of the stack's planes.
     double planeOffset(const Imaging& plane) const;

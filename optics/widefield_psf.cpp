@@ -46,6 +46,7 @@ void PsfTableOptions::validate() const {
     require(wMax > 0 && wMax <= 2000, "PSF table wMax must lie in (0, 2000], got " + num(wMax));
     require(dv > 0 && dv <= 1 && dw > 0 && dw <= 4, "PSF table steps must lie in (0, 1] (dv) and (0, 4] (dw), got " + num(dv) + " and " + num(dw));
     require(pupilNodes >= 16 && pupilNodes <= 4096, "PSF pupil nodes must lie in [16, 4096], got " + std::to_string(pupilNodes));
+    require(depthTolerance >= 0 && depthTolerance <= 1, "PSF depth tolerance must lie in [0, 1], got " + num(depthTolerance));
 }
 
 
@@ -90,23 +91,27 @@ double geoRow(double dw, double w) {
 // Mass of g within the annulus [v0, v0 + x] where g is linear from g0 (at v0) with slope s, per 2π.
 double annulusMass(double v0, double g0, double s, double x) { return g0 * (v0 * x + 0.5 * x * x) + s * (0.5 * v0 * x * x + x * x * x / 3); }
 
-WidefieldPsf::Table buildTable(const PupilOptions& pupil, const PsfTableOptions& o, double lambdaNm) {
-    WidefieldPsf::Table t;
-    t.lambdaNm = lambdaNm;
-    t.nv = static_cast<int>(std::ceil(o.vCut / o.dv)) + 1;
-    const int half = static_cast<int>(std::ceil(o.wMax / o.dw));
-    t.nw = 2 * half + 1;
-    const QuadratureRule gl = gaussLegendre01(o.pupilNodes);
-    const size_t N = gl.nodes.size();
-    // Pupil nodes: weight × ρ × amplitude, cos θ in the sample, and the mismatch's constant phase.
-    std::vector<double> c(N), cosS(N), fixedPhase(N, 0.0);
+// The pupil at Gauss–Legendre nodes in ρ: |A(ρ)|², cos θ_s and, under a mismatch, the constant phase of
+// focusing d deep through the step.
+struct PupilNodes {
+    QuadratureRule gl;
+    std::vector<double> intensity, cosS, fixedPhase;
     double power = 0;  // ∫ |A|² ρ dρ
+    double focusScale = 1;
+};
+
+PupilNodes pupilNodes(const PupilOptions& pupil, int count, double lambdaNm) {
+    PupilNodes p;
+    p.gl = gaussLegendre01(count);
+    const size_t N = p.gl.nodes.size();
+    p.intensity.resize(N);
+    p.cosS.resize(N);
+    p.fixedPhase.assign(N, 0.0);
     for (size_t n = 0; n < N; ++n) {
-        const double rho = gl.nodes[n];
-        const double a = apodization(pupil, rho);
-        c[n] = gl.weights[n] * rho * std::sqrt(a);
-        cosS[n] = std::sqrt(1 - sqr(pupil.na * rho / pupil.sampleIndex));
-        power += gl.weights[n] * rho * a;
+        const double rho = p.gl.nodes[n];
+        p.cosS[n] = std::sqrt(1 - sqr(pupil.na * rho / pupil.sampleIndex));
+        p.intensity[n] = apodization(pupil, rho) / (pupil.aplanatic ? p.cosS[n] : 1.0);
+        p.power += p.gl.weights[n] * rho * p.intensity[n];
     }
     if (!pupil.matched()) {
         // Focusing to depth d through the step: d (n_s cos θ_s − f n_i cos θ_i), with f placing the plane
@@ -114,9 +119,9 @@ WidefieldPsf::Table buildTable(const PupilOptions& pupil, const PsfTableOptions&
         std::vector<double> ds(N), di(N), weight(N);
         double wsum = 0, ms = 0, mi = 0;
         for (size_t n = 0; n < N; ++n) {
-            const double rho = gl.nodes[n];
-            weight[n] = gl.weights[n] * rho * apodization(pupil, rho);
-            ds[n] = pupil.sampleIndex * cosS[n];
+            const double rho = p.gl.nodes[n];
+            weight[n] = p.gl.weights[n] * rho * p.intensity[n];
+            ds[n] = pupil.sampleIndex * p.cosS[n];
             di[n] = pupil.immersionIndex * std::sqrt(1 - sqr(pupil.na * rho / pupil.immersionIndex));
             wsum += weight[n];
             ms += weight[n] * ds[n];
@@ -127,11 +132,29 @@ WidefieldPsf::Table buildTable(const PupilOptions& pupil, const PsfTableOptions&
             sss += weight[n] * sqr(ds[n] - ms / wsum);
             sis += weight[n] * (di[n] - mi / wsum) * (ds[n] - ms / wsum);
         }
-        const double f = sss / sis;
-        t.focusScale = f;
+        p.focusScale = sss / sis;
         const double kd = waveNumberPerMm(lambdaNm) * pupil.depthMm;
-        for (size_t n = 0; n < N; ++n) fixedPhase[n] = kd * (ds[n] - f * di[n]);
+        for (size_t n = 0; n < N; ++n) p.fixedPhase[n] = kd * (ds[n] - p.focusScale * di[n]);
     }
+    return p;
+}
+
+WidefieldPsf::Table buildTable(const PupilOptions& pupil, const PsfTableOptions& o, double lambdaNm) {
+    WidefieldPsf::Table t;
+    t.lambdaNm = lambdaNm;
+    t.nv = static_cast<int>(std::ceil(o.vCut / o.dv)) + 1;
+    const int half = static_cast<int>(std::ceil(o.wMax / o.dw));
+    t.nw = 2 * half + 1;
+    const PupilNodes p = pupilNodes(pupil, o.pupilNodes, lambdaNm);
+    const QuadratureRule& gl = p.gl;
+    const size_t N = gl.nodes.size();
+    // Pupil nodes: weight × ρ × amplitude.
+    std::vector<double> c(N);
+    for (size_t n = 0; n < N; ++n) c[n] = gl.weights[n] * gl.nodes[n] * std::sqrt(p.intensity[n]);
+    const std::vector<double>& cosS = p.cosS;
+    const std::vector<double>& fixedPhase = p.fixedPhase;
+    const double power = p.power;
+    t.focusScale = p.focusScale;
     const double norm = 2 * kPi * power;  // Parseval: ∫ |U|² d²v over the plane
     // J0(v ρ_n) for every v node: the pupil integral is then a matrix-vector product per w.
     std::vector<double> j0(static_cast<size_t>(t.nv) * N);
@@ -414,5 +437,18 @@ double WidefieldPsf::reweight(double rMm, double dzMm, double lambdaNm) const {
 }
 
 double WidefieldPsf::fwhmInFocusMm(double lambdaNm, double na) { return 1.61634 / kPi * lambdaNm * 1e-6 / na; }
+
+double pupilDistance(const PupilOptions& a, const PupilOptions& b, double lambdaNm) {
+    a.validate();
+    b.validate();
+    if (a.na != b.na || a.sampleIndex != b.sampleIndex || a.immersionIndex != b.immersionIndex || a.aplanatic != b.aplanatic)
+        throw ConfigError("pupilDistance compares pupils of one objective and sample (the same NA, indices and factor)");
+    constexpr int kNodes = 256;
+    const PupilNodes p = pupilNodes(a, kNodes, lambdaNm), q = pupilNodes(b, kNodes, lambdaNm);
+    std::complex<double> overlap = 0;
+    for (size_t n = 0; n < p.gl.nodes.size(); ++n)
+        overlap += p.gl.weights[n] * p.gl.nodes[n] * std::sqrt(p.intensity[n] * q.intensity[n]) * std::polar(1.0, p.fixedPhase[n] - q.fixedPhase[n]);
+    return std::sqrt(std::max(0.0, 2 - 2 * std::abs(overlap) / std::sqrt(p.power * q.power)));
+}
 
 }  // namespace fluorosim::optics

@@ -13,8 +13,11 @@
 //         the immersion medium, placing the plane of focus at the least-squares best focus of the
 //         aberration over the pupil: tests/optics/widefield_psf_test.cpp checks the paraxial and marginal
 //         foci against ray tracing),
-// A(ρ) = sqrt(a(θ_s)) with a the intensity apodisation (the medium's attenuation over the cone), and no
-// aplanatic sqrt(cos θ) factor. The intensity h = |U|² is normalised by Parseval so that its integral over
+// A(ρ) = sqrt(a(θ_s) / cos θ_s) with a the intensity apodisation (the medium's attenuation over the cone)
+// and 1/sqrt(cos θ_s) the aplanatic (sine-condition) factor: an isotropic emitter sends equal power per
+// solid angle, and a solid angle dΩ_s fills the pupil area ρ dρ dφ ∝ cos θ_s dΩ_s (also through an index
+// step, since n_s sin θ_s = n_i sin θ_i). Far from focus h tends to the geometric landing disc of light
+// uniform in solid angle, which the camera paths sample. The intensity h = |U|² is normalised by Parseval so that its integral over
 // the whole plane is 1 at every dz; the model PSF is h cut at v = vCut (the light beyond, about 2/(π vCut)
 // in focus, is left out, not redistributed). Tables interpolate h cubically in v and linearly in w. With
 // matched indices and apodisation depending on θ alone h is λ-independent in (v, w): one table; under a
@@ -37,6 +40,7 @@ struct PupilOptions {
     double sampleIndex = 1.33;
     double depthMm = 0;                        // focus depth below the immersion/sample interface (mismatch only)
     std::vector<double> intensityApodization;  // a(θ) at sin θ / sin θmax = i / (size − 1); empty = none
+    bool aplanatic = true;                     // false: a uniform pupil (the textbook closed forms)
     void validate() const;                     // ConfigError naming the field and value
     double collectionHalfAngle() const;        // asin(NA / n_s), in the sample
     bool matched() const { return sampleIndex == immersionIndex || depthMm == 0; }
@@ -47,6 +51,9 @@ struct PsfTableOptions {
     double wMax = 200;   // axial half-range in w = k dz
     double dv = 0.25, dw = 0.5;
     int pupilNodes = 256;  // Gauss–Legendre nodes over the pupil
+    // A stack's planes share a PSF while their pupils lie within this pupilDistance of their group's first
+    // (makePlanePsfs): the shared PSF misplaces at most twice this fraction of a point's light.
+    double depthTolerance = 0.0025;
     void validate() const;
 };
 
@@ -106,5 +113,11 @@ private:
     std::vector<double> lambdaNodes_;
     std::vector<Table> tables_;
 };
+
+// How far apart two pupils of one objective and sample are: the L2 distance of their in-focus amplitude
+// PSFs, each normalised to unit energy, least over a constant phase; by Parseval, over the pupil,
+// sqrt(2 − 2 |∫ A_a A_b e^{i(Φ_a − Φ_b)} ρ dρ| / sqrt(P_a P_b)). Small distances ε bound the change of the
+// intensity PSF: ∫ |h_a − h_b| <= 2ε. Throws ConfigError when NA, indices or the aplanatic factor differ.
+double pupilDistance(const PupilOptions& a, const PupilOptions& b, double lambdaNm);
 
 }  // namespace fluorosim::optics

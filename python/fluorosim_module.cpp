@@ -20,6 +20,7 @@
 #include "core/units.h"
 #include "database.h"
 #include "optics/acquisition.h"
+#include "optics/acquisition_summary.h"
 #include "optics/concentration_fit.h"
 #include "optics/ground_truth.h"
 #include "optics/observed_stack.h"
@@ -201,8 +202,9 @@ struct StackSetup {
 py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, const std::optional<std::string>& step, std::optional<int> spp,
                  std::optional<int64_t> seed, const std::vector<std::string>& channels, int threads, const std::optional<std::string>& base,
                  const std::string& estimator, std::optional<int> directSpp, std::optional<double> noiseRatio, std::optional<int> maxSpp,
-                 const py::object& progress) {
+                 const py::object& progress, const std::optional<std::string>& exposure) {
     optics::AcquireRequest request;
+    request.exposure = exposure;
     request.planes = planes;
     request.step = step;
     request.spp = spp;
@@ -216,16 +218,25 @@ py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, con
     request.maxSpp = maxSpp;
     StackSetup setup(sceneArg, base, request, channels, "--channels");
     const Scene& scene = setup.scene;
-    const optics::Microscope& m = setup.microscope;
+    optics::Microscope& m = setup.microscope;
     optics::AcquireOptions& o = setup.options;
     const std::vector<size_t>& selected = setup.channels;
     optics::Stack stack = optics::emptyStack(m, selected);
+    optics::AcquisitionSummary report(m, stack, o);
+    std::vector<std::string> planeWarnings;
     runInterruptible(progress, [&](std::atomic<bool>& cancel, std::atomic<double>& fraction) {
         o.cancel = &cancel;
         optics::StackCallbacks callbacks;
         callbacks.progress = [&](double f) { fraction = f; };
+        callbacks.planeDone = [&](size_t slot, int plane, const optics::PlaneImage& image) {
+            if (std::string w = report.addPlane(slot, plane, image); !w.empty()) planeWarnings.push_back(std::move(w));
+        };
         if (!optics::acquireStack(scene, m, stack, o, callbacks)) throw Cancelled("acquire cancelled");
     });
+    warnAll(planeWarnings);
+    std::optional<optics::AutoExposure> chosen;
+    if (const optics::ExposureRequest e = optics::parseExposure(exposure); e.autoFraction) chosen = optics::autoExpose(stack, m, *e.autoFraction, o.seed);
+    warnAll(report.warnings(stack, m));
     const std::vector<py::ssize_t> shape{static_cast<py::ssize_t>(stack.channels.size()), stack.planes, stack.height, stack.width};
     py::dict out;
     out["counts"] = toArray(stack.counts, shape);  // (channel, z, y, x), ADU, one noisy read-out
@@ -238,6 +249,20 @@ py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, con
     out["spp"] = o.spp;
     out["seed"] = o.seed;
     out["estimator"] = optics::estimatorName(o.estimator);
+    // The CLI's summary, the same numbers under the same names.
+    py::dict summary;
+    for (const optics::AcquisitionSummary::Entry& e : report.entries(stack, m, chosen, 1)) {
+        const py::object value = e.null ? py::none() : e.count ? py::object(py::int_(static_cast<int64_t>(e.value))) : py::object(py::float_(e.value));
+        if (e.group.empty()) summary[e.name.c_str()] = value;
+        else {
+            if (!summary.contains(e.group.c_str())) summary[e.group.c_str()] = py::dict();
+            summary[e.group.c_str()].cast<py::dict>()[e.name.c_str()] = value;
+        }
+    }
+    summary["seed"] = o.seed;
+    summary["estimator"] = optics::estimatorName(o.estimator);
+    out["summary"] = summary;
+    out["exposure_s"] = m.detector.exposureS;
     return out;
 }
 
@@ -619,11 +644,14 @@ PYBIND11_MODULE(fluorosim, mod) {
             py::arg("spp") = py::none(), py::arg("seed") = py::none(), py::arg("channels") = std::vector<std::string>{},
             py::arg("threads") = 0, py::arg("base") = py::none(), py::arg("estimator") = "split", py::arg("direct_spp") = py::none(),
             py::arg("noise_ratio") = py::none(), py::arg("max_spp") = py::none(), py::arg("progress") = py::none(),
+            py::arg("exposure") = py::none(),
             "Acquire a light-sheet z-stack of a scene with a microscope block. Returns a dict: counts (uint16), expected and "
             "stderr (float32), each (channel, z, y, x); channels, the geometry (axes, origin_um, x/y_step_um, z_step_vector_um, "
-            "pixel_size_um, z_step_um), spp, seed. Same numbers as `fluorosim acquire` with the same options (estimator: split or "
-            "path; noise_ratio and max_spp: adaptive sampling). progress: a callable given the fraction done (0..1), about every "
-            "0.1 s. Ctrl-C stops the run and raises KeyboardInterrupt.");
+            "pixel_size_um, z_step_um), spp, seed, exposure_s, and summary (the CLI's JSON summary as a dict). Same numbers as "
+            "`fluorosim acquire` with the same options (estimator: split or path; noise_ratio and max_spp: adaptive sampling; "
+            "exposure: a time such as \"20 ms\", or \"auto\" / \"auto:F\" to put the brightest pixel at F of the full well). "
+            "progress: a callable given the fraction done (0..1), about every 0.1 s. Ctrl-C stops the run and raises "
+            "KeyboardInterrupt.");
     mod.def("ground_truth", &groundTruthOf, py::arg("scene"), py::kw_only(), py::arg("planes") = py::none(), py::arg("step") = py::none(),
             py::arg("channels") = std::vector<std::string>{}, py::arg("threads") = 0, py::arg("base") = py::none(),
             "The ground truth of the scene's stack on the detector grid: {'concentration': {dye id: (z, y, x) mol/L at the pixel "

@@ -22,6 +22,7 @@
 #include "optics/setup_checks.h"
 #include "distributed_acquire.h"
 #include "optics/acquisition.h"
+#include "optics/acquisition_summary.h"
 #include "optics/stack_files.h"
 #include "core/output_checks.h"
 #include "progress.h"
@@ -51,14 +52,8 @@ std::string fingerprint(const AcquireArgs& a, const optics::Microscope& m, const
     const nlohmann::json j = {{"scene_fnv1a", h}, {"seed", o.seed}, {"spp", o.spp}, {"planes", m.stack.planes}, {"step_mm", m.stack.stepMm},
                               {"channels", channels}, {"estimator", optics::estimatorName(o.estimator)},
                               {"noise_ratio", o.noiseRatio.value_or(0.0)},
-                              {"max_spp", o.noiseRatio ? o.maxSpp : 0}};
+                              {"max_spp", o.noiseRatio ? o.maxSpp : 0}, {"exposure_s", m.detector.exposureS}};
     return j.dump();
-}
-
-double median(std::vector<double> v) {
-    if (v.empty()) return 0.0;
-    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-    return v[v.size() / 2];
 }
 
 void runAcquire(const AcquireArgs& a) {
@@ -107,53 +102,27 @@ void runAcquire(const AcquireArgs& a) {
     ProgressBar bar("acquire");
     optics::StackCallbacks cb;
     cb.progress = [&](double f) { bar.update(f); };
-    PathStats stats;
-    double seconds = 0, largest = 0, largestOverPixel = 0, computedSum = 0, pathSum = 0, pooledSum = 0, computedSeconds = 0, pathSeconds = 0;
-    std::vector<double> pathRel;       // relative standard errors over the brightest pixels
-    std::vector<double> mcOverCamera;  // MC variance over the camera's noise variance, brightest pixels
-    uint64_t pathSamples = 0, pilotSamples = 0, pixels = 0, computedPoints = 0, nonFinite = 0;
-    optics::UnscatteredTimings computedTimings;  // summed over planes
-    const double darkElectrons = m.detector.darkCurrentElectronsPerS * m.detector.exposureS;
+    optics::AcquisitionSummary report(m, stack, o);
     cb.planeDone = [&](size_t slot, int plane, const optics::PlaneImage& image) {
         checkpoint->append(slot, plane, image);
-        stats.add(image.stats);
-        seconds += image.seconds;
-        largest = std::max(largest, image.largestSample);
-        largestOverPixel = std::max(largestOverPixel, image.largestSampleOverPixel);
-        computedSum += image.computedElectrons;
-        pathSum += image.pathElectrons;
-        pooledSum += image.pooledElectrons;
-        computedSeconds += image.computedSeconds;
-        pathSeconds += image.pathSeconds;
-        computedPoints += image.computedPoints;
-        computedTimings.lattice += image.computedTimings.lattice;
-        computedTimings.transmittances += image.computedTimings.transmittances;
-        computedTimings.gains += image.computedTimings.gains;
-        computedTimings.projection += image.computedTimings.projection;
-        computedTimings.kernelThreadSeconds += image.computedTimings.kernelThreadSeconds;
-        nonFinite += image.nonFiniteSamples;
-        pathSamples += image.pathSamples;
-        pilotSamples += image.pilotSamples;
-        pixels += image.electrons.size();
-        std::vector<double> sorted = image.electrons;
-        std::sort(sorted.begin(), sorted.end());
-        const double cut = sorted[static_cast<size_t>(0.9 * (sorted.size() - 1))];
-        for (size_t i = 0; i < image.electrons.size(); ++i)
-            if (image.electrons[i] >= cut) {
-                mcOverCamera.push_back(sqr(image.stderrElectrons[i]) /
-                                       (std::max(0.0, image.electrons[i]) + darkElectrons + sqr(m.detector.readNoiseElectrons)));
-                if (image.electrons[i] > 0) pathRel.push_back(image.stderrElectrons[i] / image.electrons[i]);
-            }
-        double signal = 0;
-        for (double e : image.electrons) signal += e;
-        if (!(signal > 0))
-            std::fprintf(stderr, "fluorosim: warning: channel \"%s\", plane %d: no signal (the sheet or the focal plane misses the labelled volume)\n",
-                         m.channels[stack.channels[slot]].name.c_str(), plane);
+        if (const std::string w = report.addPlane(slot, plane, image); !w.empty()) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
     };
     const bool finished = acquireStackOnCluster(scene, m, stack, o, cb);
     bar.finish();
 
     const int planes = stack.completePlanes();
+    // --exposure auto: the stack scaled to the exposure that puts its brightest pixel at the asked fraction
+    // of the full well (exact: photoelectrons scale with the exposure), before it is written and checked.
+    std::optional<optics::AutoExposure> chosen;
+    if (const optics::ExposureRequest e = optics::parseExposure(a.exposure); e.autoFraction && planes > 0) {
+        const double before = m.detector.exposureS;
+        chosen = optics::autoExpose(stack, m, *e.autoFraction, o.seed);
+        std::fprintf(stderr,
+                     "fluorosim: exposure auto: %.4g ms (the scene's %.4g ms x %.4g) puts the brightest pixel's expected signal (%.4g e-) at "
+                     "%.3g of the full well (%.4g e-)\n",
+                     chosen->exposureS * 1e3, before * 1e3, chosen->factor, chosen->brightestElectrons * chosen->factor, chosen->fraction,
+                     m.detector.fullWellElectrons);
+    }
     const std::string description = "Fluorosim acquisition of " + a.scene + ", " + std::to_string(o.spp) + " spp, seed " + std::to_string(o.seed) +
                                     (finished ? "" : " (interrupted: " + std::to_string(planes) + " of " + std::to_string(stack.planes) + " planes)");
     if (planes > 0) optics::writeStackFiles(out, stack, m, planes, description);
@@ -163,76 +132,19 @@ void runAcquire(const AcquireArgs& a) {
                           ", continue with --resume");
     }
     fs::remove(checkpointPath);
-    float maxE = 0;
-    size_t saturated = 0, saturatedOutliers = 0;  // above the full well; of those, within 4 standard errors of it
-    for (size_t i = 0; i < stack.expected.size(); ++i) {
-        const float e = stack.expected[i];
-        maxE = std::max(maxE, e);
-        if (e > m.detector.fullWellElectrons) {
-            ++saturated;
-            if (e - 4 * stack.stderrElectrons[i] < m.detector.fullWellElectrons) ++saturatedOutliers;
-        }
+    nlohmann::json summary = {{"stack", out.counts.string()},
+                              {"expected", out.expected.string()},
+                              {"stderr", out.stderrElectrons.string()},
+                              {"preview", out.preview.string()},
+                              {"estimator", optics::estimatorName(o.estimator)},
+                              {"seed", o.seed}};
+    for (const optics::AcquisitionSummary::Entry& e : report.entries(stack, m, chosen, cluster::size())) {
+        const nlohmann::json value = e.null ? nlohmann::json(nullptr) : e.count ? nlohmann::json(static_cast<int64_t>(e.value)) : nlohmann::json(e.value);
+        if (e.group.empty()) summary[e.name] = value;
+        else summary[e.group][e.name] = value;
     }
-    const double vertices = double(stats.scatteringEvents + stats.surfaceBounces) / std::max<double>(1.0, double(stats.paths));
-    const nlohmann::json summary = {{"stack", out.counts.string()},
-                                    {"expected", out.expected.string()},
-                                    {"stderr", out.stderrElectrons.string()},
-                                    {"preview", out.preview.string()},
-                                    {"planes", stack.planes},
-                                    {"channels", stack.channels.size()},
-                                    {"width", stack.width},
-                                    {"height", stack.height},
-                                    {"pixel_size_um", m.pixelSizeMm() * 1e3},
-                                    {"z_step_um", m.stack.stepMm * 1e3},
-                                    {"spp", o.spp},
-                                    {"estimator", optics::estimatorName(o.estimator)},
-                                    {"computed_electrons_fraction", computedSum / std::max(1e-300, computedSum + pathSum)},
-                                    {"pooled_electrons_fraction", pooledSum / std::max(1e-300, computedSum + pathSum)},
-                                    {"computed_seconds", computedSeconds},
-                                    {"computed_points", computedPoints},
-                                    // Where the computed part's time went: S and the transmittances once per
-                                    // channel, then per plane the sheet's gains and the projection.
-                                    {"computed_timings",
-                                     {{"lattice_seconds", computedTimings.lattice},
-                                      {"transmittance_seconds", computedTimings.transmittances},
-                                      {"gain_seconds", computedTimings.gains},
-                                      {"projection_seconds", computedTimings.projection},
-                                      {"kernel_thread_seconds", computedTimings.kernelThreadSeconds}}},
-                                    {"path_thread_seconds", pathSeconds},
-                                    {"median_relative_stderr_top10", median(pathRel)},
-                                    {"non_finite_samples", nonFinite},
-                                    {"largest_sample_over_pixel", largestOverPixel},
-                                    {"noise_ratio_target", o.noiseRatio ? nlohmann::json(*o.noiseRatio) : nlohmann::json(nullptr)},
-                                    // The standard errors' own estimate (heavy tails make it optimistic;
-                                    // scripts/noise-vs-time.sh measures with two seeds).
-                                    {"median_mc_over_camera_variance_top10", median(mcOverCamera)},
-                                    {"mean_path_spp", double(pathSamples) / std::max<double>(1.0, double(pixels))},
-                                    {"pilot_paths", pilotSamples},
-                                    {"seed", o.seed},
-                                    {"ranks", cluster::size()},
-                                    {"seconds", seconds},
-                                    {"paths", stats.paths},
-                                    {"mean_path_vertices", vertices},
-                                    {"truncated_paths", stats.truncated},
-                                    {"largest_sample_electrons", largest},
-                                    {"max_expected_electrons", maxE},
-                                    {"full_well_electrons", m.detector.fullWellElectrons}};
     std::printf("%s\n", summary.dump().c_str());
-    // An adaptive run that stopped at its path limit says so, with the noise it reached.
-    const double mcOverCameraMedian = median(mcOverCamera);
-    if (o.noiseRatio && mcOverCameraMedian > sqr(*o.noiseRatio) * 1.5)
-        std::fprintf(stderr,
-                     "fluorosim: warning: noise target %.3g missed: the Monte Carlo error over the camera's noise is %.3g (median over the "
-                     "brightest 10 %% of pixels, as a ratio of standard deviations), at %.3g paths per pixel on average (--max-spp %d)\n",
-                     *o.noiseRatio, std::sqrt(mcOverCameraMedian), double(pathSamples) / std::max<double>(1.0, double(pixels)), o.maxSpp);
-    if (saturated > 0)
-        std::fprintf(stderr,
-                     "fluorosim: warning: %zu of %zu pixels expect more than the full well (%.3g e-; brightest %.3g e-): the camera saturates "
-                     "there%s\n",
-                     saturated, stack.expected.size(), m.detector.fullWellElectrons, double(maxE),
-                     saturatedOutliers == saturated ? "; each is within 4 Monte Carlo standard errors of the full well (rare large samples: "
-                                                      "more paths, not less exposure, may be what they need)"
-                                                    : "");
+    for (const std::string& w : report.warnings(stack, m)) std::fprintf(stderr, "fluorosim: warning: %s\n", w.c_str());
 }
 
 }  // namespace
@@ -260,6 +172,9 @@ void addAcquireCommand(CLI::App& app) {
                     "camera's noise of the expected signal, sqrt(signal + dark + read^2), decided from separate pilot paths");
     cmd->add_option("--max-spp", a->maxSpp, "Adaptive sampling: most paths per pixel (default 4096)");
     cmd->add_option("--seed", a->seed, "Random seed (default: the scene's)");
+    cmd->add_option("--exposure", a->exposure,
+                    "Exposure: a time with a unit (\"20ms\"), or auto[:F]: after the stack is rendered, scale it to the exposure that puts "
+                    "its brightest reliable pixel at F of the full well (default 0.5); the summary and the OME metadata give the exposure used");
     cmd->add_option("--threads", a->threads, "Threads (0 = all cores)");
     cmd->add_option("--channels", a->channels, "Channels to acquire, by name (default: all)")->delimiter(',');
     cmd->add_flag("--resume", a->resume, "Continue an interrupted run from STACK.checkpoint (same scene and options)");

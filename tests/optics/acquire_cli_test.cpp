@@ -94,6 +94,33 @@ TEST(AcquireCli, ExposureAndPowerAcceptUnits) {
     expectOneLineError(r, {"/microscope/detector/exposure_s", "20 mm", "units: s, ms, us, ns, min"});
 }
 
+// --exposure: a time replaces the scene's; auto:F scales the stack to put its brightest pixel at F of the
+// full well, says what it chose, and writes that exposure into the summary and the OME metadata.
+TEST(AcquireCli, ExposureAutoSaysWhatItChose) {
+    TempDir dir;
+    const std::string out = (dir.path() / "auto.ome.tif").string();
+    auto r = runCli(dir, {"acquire", beads(dir).string(), "-o", out, "--spp", "2", "--planes", "2", "--exposure", "auto:0.4"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_TRUE(contains(r.err, "exposure auto:")) << r.err;
+    const json summary = json::parse(r.out);
+    const double exposure = summary["exposure_s"].get<double>(), fullWell = summary["full_well_electrons"].get<double>();
+    EXPECT_EQ(summary["exposure_auto"]["fraction"], 0.4);
+    EXPECT_NEAR(exposure, 0.01 * summary["exposure_auto"]["factor"].get<double>(), 1e-12);  // the beads scene's 10 ms
+    // The brightest pixel (with its dark electrons) sits at 40 % of the full well, unless a larger one is
+    // a Monte Carlo outlier, which does not set the exposure.
+    EXPECT_GE(summary["max_expected_electrons"].get<double>(), 0.4 * fullWell * (1 - 1e-5));
+    const optics::TiffStackInfo stack = optics::readTiffStack(out, false);
+    const size_t at = stack.imageDescription.find("ExposureTime=\"");
+    ASSERT_NE(at, std::string::npos) << stack.imageDescription.substr(0, 800);
+    EXPECT_NEAR(std::stod(stack.imageDescription.substr(at + 14)), exposure, 1e-6 * exposure);
+    r = runCli(dir, {"acquire", beads(dir).string(), "-o", out, "--spp", "1", "--planes", "1", "--exposure", "auto:3"});
+    EXPECT_EQ(r.exitCode, 2);
+    expectOneLineError(r, {"--exposure", "auto:3"});
+    r = runCli(dir, {"acquire", beads(dir).string(), "-o", out, "--spp", "1", "--planes", "1", "--exposure", "10ms"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NEAR(json::parse(r.out)["exposure_s"].get<double>(), 0.01, 1e-15);
+}
+
 // A channel is warned about only when it sees almost none of the dyes its own lasers excite, and only
 // when it is acquired: two channels that each block the other's dye say nothing.
 TEST(AcquireCli, FilterWarningsNameOnlyAChannelBlindToItsOwnDyes) {

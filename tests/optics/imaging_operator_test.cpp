@@ -61,7 +61,7 @@ TEST(PsfProjector, BackProjectionIsTheProjectionsAdjoint) {
     FitSpecimen s;
     optics::AcquireOptions o;
     const optics::ChannelImaging imaging = optics::setUpChannelImaging(s.scene, s.microscope, 0, o);
-    const optics::PsfProjector& p = imaging.unscattered->projector();
+    const optics::PsfProjector& p = imaging.unscattered->projector(imaging.planeOffsetsMm.front());
     const optics::ProjectorGeometry& g = p.geometry();
     std::mt19937_64 rng(11);
     std::uniform_real_distribution<double> u(0, 1);
@@ -86,6 +86,47 @@ TEST(PsfProjector, BackProjectionIsTheProjectionsAdjoint) {
     const double lhs = dot(forward, y);
     EXPECT_NEAR(lhs, rhs, 1e-12 * std::abs(lhs));
     std::printf("  <P e, y> = %.15g, <e, P^T y> = %.15g\n", lhs, rhs);
+}
+
+TEST(PsfProjector, EachDyeImagesThroughItsOwnPsfNearAndFar) {
+    // A channel with a green and a red dye: a red point images as it does in a channel of the red dye
+    // alone, in the near kernels and in the far part (which once used one mean PSF of the channel's dyes).
+    FitSpecimen s;
+    optics::AcquireOptions o;
+    const optics::ChannelImaging imaging = optics::setUpChannelImaging(s.scene, s.microscope, 0, o);
+    const optics::ProjectorGeometry& g = imaging.unscattered->projector(imaging.planeOffsetsMm.front()).geometry();
+    optics::EmittingDye green, red;
+    green.nodeLambda = {500, 520};
+    green.nodeWeight = {0.5, 0.5};
+    green.detected = 3;
+    red.nodeLambda = {640, 680};
+    red.nodeWeight = {0.5, 0.5};
+    red.detected = 1;
+    optics::ChannelDyes both, redOnly;
+    both.dyes = {green, red};
+    redOnly.dyes = {red};
+    const optics::PsfProjector pBoth(both, imaging.psf, g, 5, {}), pRed(redOnly, imaging.psf, g, 5, {});
+    for (double layer : {0.0, 0.5 * (g.layers - 1)}) {  // the farthest layer from focus, and the middle
+        optics::PointEmission e;
+        e.u = 0.5 * (g.width + 2 * g.marginPixels) + 0.3;
+        e.v = 0.5 * (g.height + 2 * g.marginPixels) - 0.2;
+        e.layer = layer;
+        e.e = 1;
+        e.dye = 1;
+        const std::vector<double> inBoth = pBoth.project({e}, 1, 2)[0];
+        e.dye = 0;
+        const std::vector<double> alone = pRed.project({e}, 1, 2)[0], asGreen = pBoth.project({e}, 1, 2)[0];
+        double worst = 0, peak = 0, greenDiff = 0;
+        for (size_t i = 0; i < alone.size(); ++i) {
+            worst = std::max(worst, std::abs(inBoth[i] - alone[i]));
+            greenDiff = std::max(greenDiff, std::abs(asGreen[i] - alone[i]));
+            peak = std::max(peak, alone[i]);
+        }
+        std::printf("  layer %.1f: red point in a two-dye channel against the red channel, largest difference %.2e of the peak (green PSF: %.2e)\n",
+                    layer, worst / peak, greenDiff / peak);
+        EXPECT_LT(worst, 1e-12 * peak);
+        EXPECT_GT(greenDiff, 1e-2 * peak);
+    }
 }
 
 TEST(StackOperator, AdjointPassesTheDotProductTestForLabelsAndGrid) {

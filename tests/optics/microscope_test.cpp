@@ -3,9 +3,13 @@
 // same images as one after the other.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <thread>
 
 #include "core/errors.h"
+#include "optics/acquire_request.h"
 #include "optics/acquisition.h"
 #include "optics/light_sheet.h"
 #include "scene/scene_loader.h"
@@ -75,6 +79,57 @@ TEST(Microscope, PlanesRenderConcurrentlyAsTheyDoAlone) {
     EXPECT_EQ(b.electrons, cb.electrons);
     EXPECT_NE(a.electrons, b.electrons);
     EXPECT_GT(*std::max_element(a.electrons.begin(), a.electrons.end()), 0.0);
+}
+
+// --exposure auto scales a finished stack; it must be the stack acquired at the exposure it chose: the
+// photoelectrons scale with the exposure, and each plane keeps its noise stream.
+TEST(Microscope, AutoExposureIsTheStackAcquiredAtTheChosenExposure) {
+    const Scene scene = beadsScene();
+    optics::Microscope m = optics::Microscope::fromScene(scene, database());
+    m.width = m.height = 32;
+    m.stack.planes = 2;
+    optics::AcquireOptions o;
+    o.spp = 4;
+    optics::Stack scaled = optics::emptyStack(m, {0});
+    ASSERT_TRUE(optics::acquireStack(scene, m, scaled, o));
+    optics::Microscope chosen = m;
+    const optics::AutoExposure a = optics::autoExpose(scaled, chosen, 0.6, o.seed);
+    std::printf("  exposure %.4g ms x %.4g = %.4g ms; brightest pixel %.4g e- before\n", m.detector.exposureS * 1e3, a.factor, a.exposureS * 1e3,
+                a.brightestElectrons);
+    EXPECT_NEAR(chosen.detector.exposureS, m.detector.exposureS * a.factor, 1e-15);
+    optics::Stack direct = optics::emptyStack(chosen, {0});
+    ASSERT_TRUE(optics::acquireStack(scene, chosen, direct, o));
+    double brightest = 0, worst = 0;
+    size_t sameCounts = 0;
+    const double dark = chosen.detector.darkCurrentElectronsPerS * chosen.detector.exposureS;
+    for (size_t i = 0; i < direct.expected.size(); ++i) {
+        worst = std::max(worst, std::abs(double(scaled.expected[i]) - direct.expected[i]) / std::max(1.0, double(direct.expected[i])));
+        sameCounts += scaled.counts[i] == direct.counts[i];
+        if (direct.stderrElectrons[i] <= 0.25 * (direct.expected[i] - dark)) brightest = std::max(brightest, direct.expected[i] - dark);
+    }
+    std::printf("  against a stack acquired at that exposure: largest relative difference %.2e, counts equal in %zu of %zu pixels\n", worst,
+                sameCounts, direct.counts.size());
+    EXPECT_LT(worst, 1e-5);
+    EXPECT_GE(sameCounts, direct.counts.size() - direct.counts.size() / 1000);
+    EXPECT_NEAR(brightest, 0.6 * chosen.detector.fullWellElectrons, 1e-4 * chosen.detector.fullWellElectrons);
+    EXPECT_THROW(optics::autoExpose(scaled, chosen, 1.5, o.seed), ConfigError);
+}
+
+TEST(Microscope, ExposureOptionTakesATimeOrAuto) {
+    EXPECT_EQ(optics::parseExposure(std::string("auto")).autoFraction, 0.5);
+    EXPECT_EQ(optics::parseExposure(std::string("auto:0.8")).autoFraction, 0.8);
+    EXPECT_NEAR(*optics::parseExposure(std::string("20 ms")).seconds, 0.02, 1e-15);
+    EXPECT_FALSE(optics::parseExposure(std::nullopt).seconds || optics::parseExposure(std::nullopt).autoFraction);
+    for (const char* bad : {"auto:2", "auto0.5", "auto:", "auto:0.5x", "fast", "-5 ms", "20"}) {
+        try {
+            optics::parseExposure(std::string(bad));
+            ADD_FAILURE() << bad << " was accepted";
+        } catch (const ConfigError& e) {
+            const std::string what = e.what();
+            EXPECT_NE(what.find("--exposure"), std::string::npos) << what;
+            EXPECT_EQ(what.find('\n'), std::string::npos) << what;
+        }
+    }
 }
 
 }  // namespace

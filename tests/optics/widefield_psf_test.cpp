@@ -1,7 +1,9 @@
-// The 3-D widefield PSF (optics/widefield_psf.h) against closed forms and independent integrals: the
-// Airy pattern in focus, the on-axis intensity (closed form for a uniform pupil), the paraxial sinc²
-// law, Parseval's energy, the Gibson–Lanni mismatch against brute force, the displacement sampler
-// (chi-square), the geometric landing density against a Monte Carlo histogram, and table refinement.
+// The 3-D widefield PSF (optics/widefield_psf.h) against closed forms and independent integrals: with a
+// uniform pupil the Airy pattern in focus, the on-axis intensity, the paraxial sinc² law; Parseval's
+// energy; the aplanatic pupil against the Richards–Wolf integral and geometric optics; the Gibson–Lanni
+// mismatch against brute force; the pupil distance against the PSFs' difference; the displacement
+// sampler (chi-square), the geometric landing density against a Monte Carlo histogram, and table
+// refinement.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -20,9 +22,11 @@ using optics::PsfTableOptions;
 using optics::PupilOptions;
 using optics::WidefieldPsf;
 
+// A uniform pupil (no aplanatic factor), as the textbook closed forms assume.
 PupilOptions water(double na = 0.8) {
     PupilOptions p;
     p.na = na;
+    p.aplanatic = false;
     return p;
 }
 
@@ -142,6 +146,67 @@ TEST(WidefieldPsf, ConstantApodizationChangesNothingAndAStrongOneWidens) {
             EXPECT_NEAR(apodised.tableDensity(v, w, 500), bruteApodised(v, w), 2e-3 * apodised.tableDensity(0, 0, 500)) << v << " " << w;
 }
 
+TEST(WidefieldPsf, AplanaticPupilIsTheRichardsWolfIntegralAndTendsToTheGeometricDisc) {
+    // An aplanatic objective collecting an isotropic emitter: in the angle θ of the sample the scalar
+    // Richards–Wolf amplitude is U ∝ ∫0^θm √cos θ sin θ J0(k r n sin θ) e^{−i k dz n cos θ} dθ, an integral
+    // independent of the table's pupil coordinate.
+    PupilOptions p = water();
+    p.aplanatic = true;
+    const WidefieldPsf psf(p);
+    const double n = p.sampleIndex, thetaM = std::asin(p.na / n);
+    auto richardsWolf = [&](double v, double w) {
+        std::complex<double> sum = 0;
+        const int steps = 20000;
+        for (int i = 0; i <= steps; ++i) {
+            const double t = thetaM * i / steps, weight = (i == 0 || i == steps) ? 1 : (i % 2 ? 4 : 2);
+            sum += weight * std::polar(std::sqrt(std::cos(t)) * std::sin(t) * std::cyl_bessel_j(0.0, v * std::sin(t) / std::sin(thetaM)),
+                                       -w * n * std::cos(t));
+        }
+        return std::norm(sum);
+    };
+    const double peak = psf.tableDensity(0, 0, 520), reference = richardsWolf(0, 0);
+    double worst = 0;
+    for (double v : {0.0, 1.0, 2.5, 4.0, 7.0})
+        for (double w : {-12.0, 0.0, 5.0, 20.0})
+            worst = std::max(worst, std::abs(psf.tableDensity(v, w, 520) / peak - richardsWolf(v, w) / reference));
+    std::printf("  aplanatic pupil against the Richards-Wolf integral in theta: largest error %.2e of the peak\n", worst);
+    EXPECT_LT(worst, 2e-3);
+    // The factor narrows the in-focus core (the pupil's edge weighs more).
+    auto halfWidth = [](const WidefieldPsf& h) {
+        double lo = 0, hi = 3;
+        for (int i = 0; i < 60; ++i) {
+            const double mid = 0.5 * (lo + hi);
+            (h.tableDensity(mid, 0, 520) > 0.5 * h.tableDensity(0, 0, 520) ? lo : hi) = mid;
+        }
+        return lo;
+    };
+    const WidefieldPsf uniform(water());
+    const double narrowing = halfWidth(psf) / halfWidth(uniform) - 1;
+    std::printf("  in-focus FWHM, aplanatic against a uniform pupil at NA 0.8 in water: %+.2f %%\n", 100 * narrowing);
+    EXPECT_LT(narrowing, -0.005);
+    // Far from focus both tend to geometric optics. The emitter's light is uniform in solid angle, so the
+    // disc within the landing radius of θ1 holds (1 − cos θ1)/(1 − cos θm); a uniform pupil puts
+    // sin²θ1/sin²θm there instead. θ1 halves the pupil's area: 0.472 against 0.5. Diffraction adds the
+    // same small, oscillating excess to both (Fresnel zones at the disc's edge), so their difference is
+    // the sharp test.
+    const double sin1 = std::sin(thetaM) / std::sqrt(2.0), cos1 = std::sqrt(1 - sin1 * sin1);
+    const double geometric = (1 - cos1) / (1 - std::cos(thetaM));
+    for (double w : {100.0, 190.0}) {
+        const double v1 = w * p.na * sin1 / cos1;
+        auto encircled = [&](const WidefieldPsf& h) {  // h holds 1 over the whole plane (Parseval)
+            double inside = 0;
+            const double dv = 0.01;
+            for (double v = 0.5 * dv; v < v1; v += dv) inside += h.tableDensity(v, w, 520) * 2 * kPi * v * dv;
+            return inside;
+        };
+        const double aplanatic = encircled(psf), flat = encircled(uniform);
+        std::printf("  w %3.0f: energy within the landing radius of theta1: aplanatic %.4f, uniform pupil %.4f; geometric optics %.4f and 0.5\n", w,
+                    aplanatic, flat, geometric);
+        EXPECT_NEAR(aplanatic - flat, geometric - 0.5, 1.5e-3) << "w " << w;
+        EXPECT_NEAR(aplanatic, geometric, 0.01) << "w " << w;
+    }
+}
+
 TEST(WidefieldPsf, MismatchReducesToTheMatchedCaseAndAgreesWithBruteForce) {
     PupilOptions same = water();
     same.depthMm = 0.1;  // a depth with equal indices changes nothing
@@ -217,6 +282,38 @@ TEST(WidefieldPsf, MismatchReducesToTheMatchedCaseAndAgreesWithBruteForce) {
     const double asymmetry = std::abs(psf.tableDensity(0, 15, 520) - psf.tableDensity(0, -15, 520)) / peak;
     std::printf("  axial asymmetry at w = ±15: %.3f of the peak\n", asymmetry);
     EXPECT_GT(asymmetry, 0.03);  // 0.043 by the brute-force amplitude
+}
+
+TEST(WidefieldPsf, PupilDistanceBoundsHowFarTwoPsfsDiffer) {
+    // Two focus depths under a mismatch, and two apodisations: the intensity PSFs (unit energy) differ by
+    // at most twice the pupils' distance in L1 over the plane, and the distance is 0 for equal pupils.
+    PupilOptions a = water(0.8);
+    a.aplanatic = true;
+    a.sampleIndex = 1.45;
+    a.depthMm = 0.03;
+    EXPECT_DOUBLE_EQ(optics::pupilDistance(a, a, 520), 0.0);
+    for (double otherDepthUm : {30.5, 31.0, 33.0}) {
+        PupilOptions b = a;
+        b.depthMm = otherDepthUm * 1e-3;
+        const double distance = optics::pupilDistance(a, b, 520);
+        const WidefieldPsf ha(a, {}, {520}), hb(b, {}, {520});
+        double l1 = 0;
+        const double dv = 0.05;
+        for (double w : {-10.0, 0.0, 10.0}) {
+            double sum = 0;
+            for (double v = 0.5 * dv; v < 60; v += dv) sum += std::abs(ha.tableDensity(v, w, 520) - hb.tableDensity(v, w, 520)) * 2 * kPi * v * dv;
+            l1 = std::max(l1, sum);
+        }
+        std::printf("  depth 30 against %.1f um in n 1.45: pupil distance %.4f, largest L1 of the PSFs' difference %.4f\n", otherDepthUm, distance, l1);
+        EXPECT_GT(distance, 0.0);
+        EXPECT_LE(l1, 2 * distance);
+    }
+    PupilOptions c = water(0.8), d = c;
+    d.intensityApodization = {1.0, 0.9, 0.7};
+    EXPECT_GT(optics::pupilDistance(c, d, 520), 0.0);
+    PupilOptions other = a;
+    other.sampleIndex = 1.52;
+    EXPECT_THROW(optics::pupilDistance(a, other, 520), ConfigError);
 }
 
 TEST(WidefieldPsf, DisplacementSamplerFollowsItsDensity) {

@@ -65,11 +65,31 @@ def test_acquire_gives_the_cli_stack(tmp_path):
     np.testing.assert_array_equal(stack["counts"].ravel(), counts.ravel())
     np.testing.assert_array_equal(stack["expected"].ravel(), expected.ravel())
     assert stack["expected"].max() > stack["expected"].min()
+    # The CLI's summary, under the same names; timings and file paths aside, the same numbers.
+    summary = json.loads(run.stdout)
+    for key in ("planes", "channels", "width", "spp", "seed", "estimator", "computed_electrons_fraction", "computed_points", "paths",
+                "largest_sample_electrons", "max_expected_electrons", "exposure_s", "exposure_auto", "noise_ratio_target"):
+        assert stack["summary"][key] == summary[key], key
+    assert set(summary["computed_timings"]) == set(stack["summary"]["computed_timings"])
     # The same scene as a dict (relative mesh path resolved against `base`).
     scene_dict = beads()
     scene_dict["shapes"][0]["file"] = "bath.obj"
     from_dict = fluorosim.acquire(scene_dict, planes=4, spp=4, seed=3, step="1um", base=str(BEADS.parent))
     np.testing.assert_array_equal(from_dict["counts"], stack["counts"])
+
+
+def test_acquire_sets_the_exposure_as_the_cli_does(tmp_path):
+    scene = tmp_path / "beads.json"
+    scene.write_text(json.dumps(beads()))
+    run = cli("acquire", scene, "-o", tmp_path / "s.ome.tif", "--planes", "2", "--spp", "2", "--exposure", "auto:0.4")
+    assert run.returncode == 0, run.stderr
+    stack = fluorosim.acquire(str(scene), planes=2, spp=2, exposure="auto:0.4")
+    summary = json.loads(run.stdout)
+    assert stack["exposure_s"] == summary["exposure_s"] == stack["summary"]["exposure_s"]
+    assert stack["summary"]["exposure_auto"] == summary["exposure_auto"]
+    np.testing.assert_array_equal(stack["counts"].ravel(), tifffile.imread(tmp_path / "s.ome.tif").ravel())
+    with pytest.raises(ValueError, match="--exposure"):
+        fluorosim.acquire(str(scene), planes=1, spp=1, exposure="auto:2")
 
 
 def test_acquire_takes_the_cli_estimator_options(tmp_path):

@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "media/fluorophore.h"
+#include "optics/acquisition.h"
 #include "optics/filter.h"
 #include "optics/light_sheet.h"
 #include "scene/beam.h"
@@ -53,6 +54,41 @@ inline std::shared_ptr<BeamProfile> addLayerSheet(Scene& scene, double index) {
     auto sheet = optics::makeLightSheet(spec);
     scene.lights.push_back(BeamLight{sheet, spec});
     return sheet;
+}
+
+// The part of a uniform layer's image that the computed image leaves out by design: the PSF's tail beyond
+// its cut (a fraction `tail` of each point's light, spread as tail · vCut / (2π kNA r³) per mm² beyond the
+// cut radius; docs/model.md) from dye beyond the computed region, the field with `marginPixels` on each
+// side. A pixel at p misses tail · vCut / (2π kNA) ∫ dφ / r_edge(φ), r_edge the distance from p to the
+// region's edge in direction φ; averaged over the field's pixel centres (midpoint rule in φ).
+inline double layerTailLeftOut(double tail, double vCut, double knaPerMm, const LayerCamera& camera, int marginPixels) {
+    const double half = (0.5 * camera.size + marginPixels) * camera.pixelMm;
+    const int angles = 720;
+    double sum = 0;
+    for (int y = 0; y < camera.size; ++y)
+        for (int x = 0; x < camera.size; ++x) {
+            const double px = (x + 0.5 - 0.5 * camera.size) * camera.pixelMm, py = (y + 0.5 - 0.5 * camera.size) * camera.pixelMm;
+            double inverse = 0;
+            for (int a = 0; a < angles; ++a) {
+                const double phi = 2 * kPi * (a + 0.5) / angles, c = std::cos(phi), s = std::sin(phi);
+                const double rx = c > 0 ? (half - px) / c : (-half - px) / c, ry = s > 0 ? (half - py) / s : (-half - py) / s;
+                inverse += 1 / std::min(rx, ry);
+            }
+            sum += tail * vCut / (2 * kPi * knaPerMm) * inverse * 2 * kPi / angles;
+        }
+    return sum / (camera.size * camera.size);
+}
+
+// The fraction of a uniform layer's closed form that the channel's computed image keeps: all but the tail
+// its region leaves out (layerTailLeftOut), with the tail's mass from the channel's own PSF table (Parseval:
+// 1 − enclosed, averaged over the layer's thickness at `lambdaNm`; widefield_psf_test checks the table).
+inline double layerImageKept(const optics::ChannelImaging& imaging, const DyeLayer& layer, double lambdaNm, const LayerCamera& camera) {
+    const optics::WidefieldPsf& psf = *imaging.psf;
+    const int n = 20;
+    double enclosed = 0;
+    for (int k = 0; k < n; ++k) enclosed += psf.enclosed(layer.thicknessMm * ((k + 0.5) / n - 0.5), lambdaNm) / n;
+    const double kna = 2 * kPi / (lambdaNm * 1e-6) * psf.pupil().na;
+    return 1 - layerTailLeftOut(1 - enclosed, psf.table().vCut, kna, camera, imaging.unscattered->geometry().marginPixels);
 }
 
 // `attenuated`: the sheet loses light in the layer from where it entered (Beer–Lambert); a perfect

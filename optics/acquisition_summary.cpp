@@ -1,0 +1,150 @@
+#include "optics/acquisition_summary.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include "core/math.h"
+
+namespace fluorosim::optics {
+namespace {
+
+double median(std::vector<double> v) {
+    if (v.empty()) return 0.0;
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    return v[v.size() / 2];
+}
+
+std::string formatted(const char* format, auto... args) {
+    char buffer[1024];
+    std::snprintf(buffer, sizeof buffer, format, args...);
+    return buffer;
+}
+
+}  // namespace
+
+AcquisitionSummary::AcquisitionSummary(const Microscope& m, const Stack& stack, const AcquireOptions& options)
+    : options_(options), darkElectrons_(m.detector.darkCurrentElectronsPerS * m.detector.exposureS), readNoise_(m.detector.readNoiseElectrons) {
+    for (size_t c : stack.channels) channelNames_.push_back(m.channels[c].name);
+}
+
+std::string AcquisitionSummary::addPlane(size_t slot, int plane, const PlaneImage& image) {
+    stats_.add(image.stats);
+    seconds_ += image.seconds;
+    largest_ = std::max(largest_, image.largestSample);
+    largestOverPixel_ = std::max(largestOverPixel_, image.largestSampleOverPixel);
+    computedSum_ += image.computedElectrons;
+    pathSum_ += image.pathElectrons;
+    pooledSum_ += image.pooledElectrons;
+    computedSeconds_ += image.computedSeconds;
+    pathSeconds_ += image.pathSeconds;
+    computedPoints_ += image.computedPoints;
+    computedTimings_.lattice += image.computedTimings.lattice;
+    computedTimings_.transmittances += image.computedTimings.transmittances;
+    computedTimings_.gains += image.computedTimings.gains;
+    computedTimings_.projection += image.computedTimings.projection;
+    computedTimings_.kernelThreadSeconds += image.computedTimings.kernelThreadSeconds;
+    nonFinite_ += image.nonFiniteSamples;
+    pathSamples_ += image.pathSamples;
+    pilotSamples_ += image.pilotSamples;
+    pixels_ += image.electrons.size();
+    if (image.electrons.empty()) return "";
+    std::vector<double> sorted = image.electrons;
+    std::sort(sorted.begin(), sorted.end());
+    const double cut = sorted[static_cast<size_t>(0.9 * static_cast<double>(sorted.size() - 1))];
+    for (size_t i = 0; i < image.electrons.size(); ++i)
+        if (image.electrons[i] >= cut) {
+            mcOverCamera_.push_back(sqr(image.stderrElectrons[i]) / (std::max(0.0, image.electrons[i]) + darkElectrons_ + sqr(readNoise_)));
+            if (image.electrons[i] > 0) pathRel_.push_back(image.stderrElectrons[i] / image.electrons[i]);
+        }
+    double signal = 0;
+    for (double e : image.electrons) signal += e;
+    if (signal > 0) return "";
+    return formatted("channel \"%s\", plane %d: no signal (the sheet or the focal plane misses the labelled volume)", channelNames_.at(slot).c_str(),
+                     plane);
+}
+
+std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& stack, const Microscope& m, const std::optional<AutoExposure>& exposure,
+                                                                   int ranks) const {
+    float maxE = 0;
+    for (float e : stack.expected) maxE = std::max(maxE, e);
+    const double total = std::max(1e-300, computedSum_ + pathSum_);
+    const double vertices = double(stats_.scatteringEvents + stats_.surfaceBounces) / std::max<double>(1.0, double(stats_.paths));
+    std::vector<Entry> e = {
+        {"", "planes", double(stack.planes), false, true},
+        {"", "channels", double(stack.channels.size()), false, true},
+        {"", "width", double(stack.width), false, true},
+        {"", "height", double(stack.height), false, true},
+        {"", "pixel_size_um", m.pixelSizeMm() * 1e3},
+        {"", "z_step_um", m.stack.stepMm * 1e3},
+        {"", "spp", double(options_.spp), false, true},
+        {"", "computed_electrons_fraction", computedSum_ / total},
+        {"", "pooled_electrons_fraction", pooledSum_ / total},
+        {"", "computed_seconds", computedSeconds_},
+        {"", "computed_points", double(computedPoints_), false, true},
+        // Where the computed part's time went: S and the transmittances once per channel, then per plane
+        // the sheet's gains and the projection.
+        {"computed_timings", "lattice_seconds", computedTimings_.lattice},
+        {"computed_timings", "transmittance_seconds", computedTimings_.transmittances},
+        {"computed_timings", "gain_seconds", computedTimings_.gains},
+        {"computed_timings", "projection_seconds", computedTimings_.projection},
+        {"computed_timings", "kernel_thread_seconds", computedTimings_.kernelThreadSeconds},
+        {"", "path_thread_seconds", pathSeconds_},
+        {"", "median_relative_stderr_top10", median(pathRel_)},
+        {"", "non_finite_samples", double(nonFinite_), false, true},
+        {"", "largest_sample_over_pixel", largestOverPixel_},
+        {"", "noise_ratio_target", options_.noiseRatio.value_or(0.0), !options_.noiseRatio},
+        // The standard errors' own estimate (heavy tails make it optimistic; scripts/noise-vs-time.sh
+        // measures with two seeds), at the scene's exposure.
+        {"", "median_mc_over_camera_variance_top10", median(mcOverCamera_)},
+        {"", "mean_path_spp", double(pathSamples_) / std::max<double>(1.0, double(pixels_))},
+        {"", "pilot_paths", double(pilotSamples_), false, true},
+        {"", "ranks", double(ranks), false, true},
+        {"", "seconds", seconds_},
+        {"", "paths", double(stats_.paths), false, true},
+        {"", "mean_path_vertices", vertices},
+        {"", "truncated_paths", double(stats_.truncated), false, true},
+        {"", "largest_sample_electrons", largest_},
+        {"", "max_expected_electrons", double(maxE)},
+        {"", "full_well_electrons", m.detector.fullWellElectrons},
+        {"", "exposure_s", m.detector.exposureS},
+    };
+    if (exposure) {
+        e.push_back({"exposure_auto", "fraction", exposure->fraction});
+        e.push_back({"exposure_auto", "factor", exposure->factor});
+        e.push_back({"exposure_auto", "brightest_electrons_before", exposure->brightestElectrons});
+    } else {
+        e.push_back({"", "exposure_auto", 0.0, true});
+    }
+    return e;
+}
+
+std::vector<std::string> AcquisitionSummary::warnings(const Stack& stack, const Microscope& m) const {
+    std::vector<std::string> out;
+    // An adaptive run that stopped at its path limit says so, with the noise it reached.
+    const double mcOverCameraMedian = median(mcOverCamera_);
+    if (options_.noiseRatio && mcOverCameraMedian > sqr(*options_.noiseRatio) * 1.5)
+        out.push_back(formatted("noise target %.3g missed: the Monte Carlo error over the camera's noise is %.3g (median over the brightest 10 %% "
+                                "of pixels, as a ratio of standard deviations), at %.3g paths per pixel on average (--max-spp %d)",
+                                *options_.noiseRatio, std::sqrt(mcOverCameraMedian), double(pathSamples_) / std::max<double>(1.0, double(pixels_)),
+                                options_.maxSpp));
+    float maxE = 0;
+    size_t saturated = 0, saturatedOutliers = 0;  // above the full well; of those, within 4 standard errors of it
+    for (size_t i = 0; i < stack.expected.size(); ++i) {
+        const float e = stack.expected[i];
+        maxE = std::max(maxE, e);
+        if (e > m.detector.fullWellElectrons) {
+            ++saturated;
+            if (e - 4 * stack.stderrElectrons[i] < m.detector.fullWellElectrons) ++saturatedOutliers;
+        }
+    }
+    if (saturated > 0)
+        out.push_back(formatted("%zu of %zu pixels expect more than the full well (%.3g e-; brightest %.3g e-): the camera saturates there%s", saturated,
+                                stack.expected.size(), m.detector.fullWellElectrons, double(maxE),
+                                saturatedOutliers == saturated ? "; each is within 4 Monte Carlo standard errors of the full well (rare large "
+                                                                 "samples: more paths, not less exposure, may be what they need)"
+                                                               : ""));
+    return out;
+}
+
+}  // namespace fluorosim::optics

@@ -1,0 +1,47 @@
+#pragma once
+// What an acquisition reports about itself, accumulated plane by plane: the numbers of `fluorosim
+// acquire`'s JSON summary and of the Python result's "summary", and the warnings about the result (a
+// plane without signal, a missed noise target, saturated pixels). One place, so that both say the same.
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "optics/acquisition.h"
+#include "optics/microscope.h"
+#include "render/path_tracer.h"
+
+namespace fluorosim::optics {
+
+class AcquisitionSummary {
+public:
+    AcquisitionSummary(const Microscope& microscope, const Stack& stack, const AcquireOptions& options);
+
+    // A finished plane. Returns a warning when it holds no signal, else "".
+    std::string addPlane(size_t channelSlot, int plane, const PlaneImage& image);
+
+    // One number of the summary: `group` names a nested block ("" at the top), `null` a value that does
+    // not apply (a noise target when none was set), `count` an integer.
+    struct Entry {
+        std::string group, name;
+        double value = 0;
+        bool null = false, count = false;
+    };
+    // The summary of the finished stack (after autoExpose, if any), in the CLI's order; the seed (a 64-bit
+    // integer), the estimator and the files are the caller's.
+    std::vector<Entry> entries(const Stack& stack, const Microscope& microscope, const std::optional<AutoExposure>& exposure, int ranks) const;
+    // Warnings about the finished stack: a missed noise target, pixels expecting more than the full well.
+    std::vector<std::string> warnings(const Stack& stack, const Microscope& microscope) const;
+
+private:
+    AcquireOptions options_;
+    double darkElectrons_, readNoise_;
+    std::vector<std::string> channelNames_;
+    PathStats stats_;
+    double seconds_ = 0, largest_ = 0, largestOverPixel_ = 0, computedSum_ = 0, pathSum_ = 0, pooledSum_ = 0, computedSeconds_ = 0, pathSeconds_ = 0;
+    std::vector<double> pathRel_;       // relative standard errors over the brightest pixels
+    std::vector<double> mcOverCamera_;  // Monte Carlo variance over the camera's noise variance, brightest pixels
+    uint64_t pathSamples_ = 0, pilotSamples_ = 0, pixels_ = 0, computedPoints_ = 0, nonFinite_ = 0;
+    UnscatteredTimings computedTimings_;  // summed over planes
+};
+
+}  // namespace fluorosim::optics
