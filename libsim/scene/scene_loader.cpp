@@ -1,4 +1,5 @@
 #include "scene/scene_loader.h"
+#include "scene/tissue_presets.h"
 
 #include <cerrno>
 #include <charconv>
@@ -453,11 +454,20 @@ private:
         n.requireObject();
         for (auto it = n.raw().begin(); it != n.raw().end(); ++it) {
             const Node m(it.value(), n.path() + "/" + excerpt(it.key()), file_);
-            m.allowOnly({"sigma_a", "sigma_s", "g", "ior", "dyes", "volume"});
-            const Spectrum sa = m.has("sigma_a") ? spectrum(m.at("sigma_a"), SpectrumKind::Coefficient) : Spectrum::constant(0);
-            const Spectrum ss = m.has("sigma_s") ? spectrum(m.at("sigma_s"), SpectrumKind::Coefficient) : Spectrum::constant(0);
-            const double g = m.has("g") ? m.at("g").number(-1, 1, true, true) : 0.0;
-            const double ior = m.has("ior") ? m.at("ior").number(1, 10) : 1.0;
+            m.allowOnly({"tissue", "sigma_a", "sigma_s", "g", "ior", "dyes", "volume"});
+            // A tissue preset gives the defaults; the medium's own fields override them.
+            const TissuePreset* tissue = nullptr;
+            if (m.has("tissue")) {
+                const std::string name = m.at("tissue").str();
+                tissue = findTissuePreset(name);
+                if (!tissue) m.at("tissue").failQuoted("unknown tissue preset \"" + excerpt(name) + "\" (presets: " + tissuePresetNames() + ")");
+            }
+            const Spectrum sa = m.has("sigma_a") ? spectrum(m.at("sigma_a"), SpectrumKind::Coefficient)
+                                : Spectrum::constant(tissue ? tissue->absorption : 0.0);
+            const Spectrum ss = m.has("sigma_s") ? spectrum(m.at("sigma_s"), SpectrumKind::Coefficient)
+                                : tissue ? Spectrum::tabulated(tissue->scattering()) : Spectrum::constant(0);
+            const double g = m.has("g") ? m.at("g").number(-1, 1, true, true) : tissue ? tissue->g : 0.0;
+            const double ior = m.has("ior") ? m.at("ior").number(1, 10) : tissue ? tissue->ior : 1.0;
             std::vector<DyeEntry> entries;
             if (m.has("dyes")) entries = loadDyes(m.at("dyes"));
             std::vector<DyeComponent> dyes;

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -13,6 +14,7 @@
 #include "core/errors.h"
 #include "database.h"
 #include "scene/scene_loader.h"
+#include "scene/tissue_presets.h"
 #include "support/temp_dir.h"
 
 namespace fluorosim {
@@ -617,6 +619,38 @@ TEST(SceneLoader, FoldersAreNotSceneFiles) {
     json j = minimalScene();
     j["shapes"].push_back({{"type", "mesh"}, {"file", (dir.path() / "block.obj").string()}, {"unit", "mm"}, {"material", "white"}});
     expectRejected(j, {"/shapes/3/file", "is a folder"}, true);
+}
+
+TEST(SceneLoaderSemantics, TissuePresetsGiveDefaultsThatFieldsOverride) {
+    json j = minimalScene();
+    j["media"]["water"] = {{"tissue", "grey_matter"}};
+    Scene scene = load(j);
+    const Medium* grey = nullptr;
+    for (const Medium& m : scene.media)
+        if (m.name() == "water") grey = &m;
+    ASSERT_NE(grey, nullptr);
+    // Jacques 2013: mu_s' = 2.42 /mm (lambda / 500 nm)^-1.611; with g 0.88, mu_s = mu_s' / 0.12 (18-25 /mm at 488 nm).
+    for (double lambda : {488.0, 561.0, 640.0})
+        EXPECT_NEAR(grey->scattering()(lambda), 2.42 * std::pow(lambda / 500, -1.611) / 0.12, 1e-5 * grey->scattering()(lambda)) << lambda;
+    EXPECT_NEAR(grey->scattering()(488), 20.97, 0.01);
+    EXPECT_DOUBLE_EQ(grey->ior(), 1.365);
+    EXPECT_DOUBLE_EQ(grey->solventAbsorption()(561), 0.02);
+    // Fields override the preset.
+    j["media"]["water"] = {{"tissue", "cleared_idisco"}, {"sigma_s", "2 /mm"}};
+    scene = load(j);
+    for (const Medium& m : scene.media)
+        if (m.name() == "water") {
+            EXPECT_DOUBLE_EQ(m.scattering()(500), 2.0);
+            EXPECT_DOUBLE_EQ(m.ior(), 1.56);
+            EXPECT_DOUBLE_EQ(m.phase().g(), 0.9);
+        }
+    for (const TissuePreset& p : tissuePresets()) {
+        EXPECT_FALSE(p.source.empty()) << p.name;
+        EXPECT_GT(p.ior, 1.3) << p.name;
+        EXPECT_LT(p.g, 1.0) << p.name;
+    }
+    j["media"]["water"] = {{"tissue", "gray_matter"}};
+    expectRejected(j, {"/media/water/tissue", "unknown tissue preset \"gray_matter\"", "grey_matter, white_matter"});
 }
 
 }  // namespace
