@@ -1,12 +1,15 @@
 """`import fluorosim` (python/fluorosim_module.cpp) against the CLI: the same numbers for the same
-options, the same error messages, a stack round trip through tifffile with its metadata, and the GIL
-released while rendering. Run by ctest (tests/CMakeLists.txt) with PYTHONPATH at build/python."""
+options, the same error messages, a stack round trip through tifffile with its metadata, the GIL
+released while rendering, and docs/python.md's examples run as written. Run by ctest (tests/CMakeLists.txt) with PYTHONPATH at build/python."""
 import copy
 import json
 import os
+import shutil
 import subprocess
+import sys
 import threading
 import time
+import types
 from pathlib import Path
 
 import numpy as np
@@ -376,3 +379,49 @@ def test_acquire_reports_progress_and_stops_on_ctrl_c():
     with pytest.raises(KeyboardInterrupt):
         fluorosim.acquire(long_run, planes=64, spp=64)
     assert time.monotonic() - start < 10
+
+
+def docs_block(marker):
+    """The Python block after an HTML comment marker in docs/python.md, as the reader sees it."""
+    text = (SOURCE / "docs" / "python.md").read_text()
+    after = text[text.index(marker):]
+    start = after.index("```python\n") + len("```python\n")
+    return after[start:after.index("```", start)]
+
+
+def test_the_docs_napari_example_puts_channels_on_layers_at_their_physical_size(tmp_path, monkeypatch):
+    calls = []
+
+    class Viewer:
+        def add_image(self, data, **kwargs):
+            calls.append((data, kwargs))
+
+    monkeypatch.setitem(sys.modules, "napari", types.SimpleNamespace(Viewer=Viewer))
+    monkeypatch.chdir(SOURCE)
+    namespace = {}
+    exec(docs_block("<!-- napari-example"), namespace)
+    (data, kwargs), = calls
+    stack = namespace["stack"]
+    assert data.shape == (1, 8, 64, 64) and kwargs["channel_axis"] == 0 and kwargs["name"] == ["AF488"]
+    assert kwargs["scale"] == pytest.approx((1.0, 6.5 / 16, 6.5 / 16))
+    # The CLI's file opens the same way: (C, Z, Y, X) and the same physical sizes in its OME metadata.
+    run = cli("acquire", SOURCE / "samples" / "lightsheet" / "beads.json", "-o", tmp_path / "b.ome.tif", "--planes", "8", "--spp", "4")
+    assert run.returncode == 0, run.stderr
+    with tifffile.TiffFile(tmp_path / "b.ome.tif") as tif:
+        series = tif.series[0]
+        # Unsqueezed, as OME orders them (tifffile drops the single channel and the T and S axes otherwise).
+        assert series.get_axes(False) == "TCZYXS" and series.get_shape(False) == (1, *data.shape, 1)
+        ome = tif.ome_metadata
+    for name, value in (("PhysicalSizeX", stack["pixel_size_um"]), ("PhysicalSizeZ", stack["z_step_um"])):
+        assert float(ome.split(name + '="')[1].split('"')[0]) == pytest.approx(value, rel=1e-9)
+
+
+def test_the_docs_numpy_example_runs_as_written(tmp_path, monkeypatch):
+    shutil.copytree(SOURCE / "samples" / "lightsheet", tmp_path / "samples" / "lightsheet")
+    monkeypatch.chdir(tmp_path)
+    namespace = {}
+    exec(docs_block("<!-- numpy-example"), namespace)
+    ratio = namespace["measured"].sum() / namespace["perfect"].sum()
+    assert 0.99 < ratio < 1.0  # clear water: the acquired image keeps all but water's own absorption
+    # The 20 uM fibre read at the pixel centres (its peak lies between them).
+    assert 15e-6 < namespace["truth"]["concentration"]["alexa_fluor_488"].max() <= 20e-6 * (1 + 1e-6)
