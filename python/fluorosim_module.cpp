@@ -66,46 +66,6 @@ py::array_t<T> toArray(const std::vector<T>& values, std::vector<py::ssize_t> sh
     return a;
 }
 
-py::dict renderScene(const py::object& sceneArg, std::optional<int> spp, std::optional<uint64_t> seed, int threads,
-                const std::optional<std::string>& base) {
-    const Scene scene = [&] {
-        Scene s = loadAnyScene(sceneArg, base);
-        if (seed) s.render.seed = *seed;
-        return s;
-    }();
-    RenderOptions opt;
-    opt.spp = spp.value_or(scene.render.spp);
-    opt.threads = threads;
-    opt.seed = scene.render.seed;
-    opt.sppPerPass = opt.spp;
-    opt.validate();
-    Film film(scene.camera.width, scene.camera.height, scene.spectral.lambdaMin, scene.spectral.lambdaMax, scene.spectral.binWidth,
-              database().cie1931(), FluorescencePlan(scene).active());
-    RenderSummary summary;
-    {
-        py::gil_scoped_release release;
-        summary = fluorosim::render(scene, film, opt);
-    }
-    const ExrImage img = film.image(summary.sppCompleted);
-    const auto h = static_cast<py::ssize_t>(img.height), w = static_cast<py::ssize_t>(img.width);
-    py::dict out, layers, spectral;
-    out["rgb"] = toArray(img.rgb, {h, w, 3});
-    for (const RgbLayer& l : img.rgbLayers) layers[py::str(l.prefix)] = toArray(l.rgb, {h, w, 3});
-    for (const SpectralLayer& l : img.spectral) {
-        const auto bins = static_cast<py::ssize_t>(l.wavelengthsNm.size());
-        spectral[py::str(l.prefix.empty() ? "total" : l.prefix)] = toArray(l.values, {bins, h, w});
-    }
-    out["rgb_layers"] = layers;
-    out["spectral"] = spectral;  // per layer: (bins, height, width), spectral radiance per nm
-    out["wavelengths_nm"] = toArray(img.spectral.at(0).wavelengthsNm, {static_cast<py::ssize_t>(img.spectral.at(0).wavelengthsNm.size())});
-    out["spp"] = summary.sppCompleted;
-    out["seed"] = opt.seed;
-    out["seconds"] = summary.seconds;
-    out["paths"] = summary.stats.paths;
-    out["non_finite_samples"] = summary.nonFiniteSamples;
-    return out;
-}
-
 // Runs `work(cancel, fraction)` without the GIL on a worker thread while this thread, holding the GIL
 // between naps of 0.1 s, passes the work's progress to `progress` (a callable taking a fraction in
 // [0, 1], or None) and watches for Ctrl-C: it sets `cancel`, the work stops at its next check, and the
@@ -155,6 +115,47 @@ void runInterruptible(const py::object& progress, Work&& work) {
     if (interrupted) throw Cancelled("interrupted (Ctrl-C)");
     if (failure) std::rethrow_exception(failure);
     if (!progress.is_none() && reported != 1.0) progress(1.0);
+}
+
+py::dict renderScene(const py::object& sceneArg, std::optional<int> spp, std::optional<uint64_t> seed, int threads,
+                const std::optional<std::string>& base, const py::object& progress) {
+    const Scene scene = [&] {
+        Scene s = loadAnyScene(sceneArg, base);
+        if (seed) s.render.seed = *seed;
+        return s;
+    }();
+    RenderOptions opt;
+    opt.spp = spp.value_or(scene.render.spp);
+    opt.threads = threads;
+    opt.seed = scene.render.seed;
+    opt.sppPerPass = opt.spp;
+    opt.validate();
+    Film film(scene.camera.width, scene.camera.height, scene.spectral.lambdaMin, scene.spectral.lambdaMax, scene.spectral.binWidth,
+              database().cie1931(), FluorescencePlan(scene).active());
+    RenderSummary summary;
+    runInterruptible(progress, [&](std::atomic<bool>& cancel, std::atomic<double>& fraction) {
+        opt.cancel = &cancel;
+        opt.progress = [&](double f) { fraction = f; };
+        summary = fluorosim::render(scene, film, opt);
+    });
+    const ExrImage img = film.image(summary.sppCompleted);
+    const auto h = static_cast<py::ssize_t>(img.height), w = static_cast<py::ssize_t>(img.width);
+    py::dict out, layers, spectral;
+    out["rgb"] = toArray(img.rgb, {h, w, 3});
+    for (const RgbLayer& l : img.rgbLayers) layers[py::str(l.prefix)] = toArray(l.rgb, {h, w, 3});
+    for (const SpectralLayer& l : img.spectral) {
+        const auto bins = static_cast<py::ssize_t>(l.wavelengthsNm.size());
+        spectral[py::str(l.prefix.empty() ? "total" : l.prefix)] = toArray(l.values, {bins, h, w});
+    }
+    out["rgb_layers"] = layers;
+    out["spectral"] = spectral;  // per layer: (bins, height, width), spectral radiance per nm
+    out["wavelengths_nm"] = toArray(img.spectral.at(0).wavelengthsNm, {static_cast<py::ssize_t>(img.spectral.at(0).wavelengthsNm.size())});
+    out["spp"] = summary.sppCompleted;
+    out["seed"] = opt.seed;
+    out["seconds"] = summary.seconds;
+    out["paths"] = summary.stats.paths;
+    out["non_finite_samples"] = summary.nonFiniteSamples;
+    return out;
 }
 
 // Library warnings as Python warnings (UserWarning), so that filters and pytest see them.
@@ -637,9 +638,10 @@ PYBIND11_MODULE(fluorosim, mod) {
         }
     });
     mod.def("render", &renderScene, py::arg("scene"), py::kw_only(), py::arg("spp") = py::none(), py::arg("seed") = py::none(),
-            py::arg("threads") = 0, py::arg("base") = py::none(),
+            py::arg("threads") = 0, py::arg("base") = py::none(), py::arg("progress") = py::none(),
             "Render a scene (a path or a dict). Returns a dict: rgb (H, W, 3), rgb_layers, spectral {layer: (bins, H, W)}, "
-            "wavelengths_nm, spp, seed, seconds, paths, non_finite_samples.");
+            "wavelengths_nm, spp, seed, seconds, paths, non_finite_samples. progress: a callable given the fraction done (0..1), "
+            "about every 0.1 s. Ctrl-C stops the render and raises KeyboardInterrupt.");
     mod.def("acquire", &acquireScene, py::arg("scene"), py::kw_only(), py::arg("planes") = py::none(), py::arg("step") = py::none(),
             py::arg("spp") = py::none(), py::arg("seed") = py::none(), py::arg("channels") = std::vector<std::string>{},
             py::arg("threads") = 0, py::arg("base") = py::none(), py::arg("estimator") = "split", py::arg("direct_spp") = py::none(),

@@ -381,6 +381,23 @@ def test_acquire_reports_progress_and_stops_on_ctrl_c():
     assert time.monotonic() - start < 10
 
 
+def test_render_reports_progress_and_stops_on_ctrl_c():
+    import _thread
+
+    seen = []
+    fluorosim.render(SMALL, spp=8, progress=seen.append)
+    assert seen and seen[-1] == 1.0
+    assert all(0 <= a <= b <= 1 for a, b in zip(seen, seen[1:]))
+    long_render = copy.deepcopy(SMALL)
+    long_render["camera"]["resolution"] = [256, 256]
+    timer = threading.Timer(0.5, _thread.interrupt_main)
+    start = time.monotonic()
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        fluorosim.render(long_render, spp=100000)
+    assert time.monotonic() - start < 10
+
+
 def docs_block(marker):
     """The Python block after an HTML comment marker in docs/python.md, as the reader sees it."""
     text = (SOURCE / "docs" / "python.md").read_text()
