@@ -23,6 +23,9 @@ struct VoxelizeArgs {
     std::vector<std::string> swc, dyes, concentrations, grids;
     std::string voxel, mode = "filled", output;
     std::optional<std::string> membraneThickness;
+    // Placement per file (one value for all, or one per file): "10um,0um,-5um", and "z:90,x:15" (degrees
+    // about x, y or z in that order, about the neuron's soma).
+    std::vector<std::string> offsets, rotations;
     int supersampling = 4;
     int threads = 0;
 };
@@ -67,6 +70,37 @@ inline Concentration parseConcentration(const std::string& text) {
     return {molar * 1e6, "uM"};
 }
 
+// "10um,0um,-5um": three lengths with units, in µm.
+inline Vec3 parseOffsetUm(const std::string& text) {
+    std::vector<std::string> parts{""};
+    for (char c : text) {
+        if (c == ',') parts.emplace_back();
+        else parts.back() += c;
+    }
+    if (parts.size() != 3) throw ConfigError("--offset: expected three lengths \"x,y,z\" with units, e.g. 10um,0um,-5um, got \"" + text + "\"");
+    Vec3 v;
+    for (int k = 0; k < 3; ++k) v[k] = parseQuantity(parts[static_cast<size_t>(k)], Dimension::Length, "--offset") * 1e3;
+    return v;
+}
+
+// "z:90,x:15": rotations in degrees about x, y or z, applied in order.
+inline std::vector<std::pair<char, double>> parseRotations(const std::string& text) {
+    std::vector<std::pair<char, double>> out;
+    size_t start = 0;
+    while (start <= text.size()) {
+        const size_t end = std::min(text.find(',', start), text.size());
+        const std::string part = text.substr(start, end - start);
+        double degrees = 0;
+        const bool axis = part.size() >= 3 && (part[0] == 'x' || part[0] == 'y' || part[0] == 'z') && part[1] == ':';
+        const auto [ptr, ec] = axis ? std::from_chars(part.data() + 2, part.data() + part.size(), degrees) : std::from_chars_result{nullptr, std::errc::invalid_argument};
+        if (!axis || ec != std::errc() || ptr != part.data() + part.size() || !std::isfinite(degrees))
+            throw ConfigError("--rotate: expected rotations \"axis:degrees\" about x, y or z, comma-separated, e.g. z:90,x:15, got \"" + text + "\"");
+        out.emplace_back(part[0], degrees);
+        start = end + 1;
+    }
+    return out;
+}
+
 // Checks the request, reads the SWC files and writes the grids; `progress` gets the finished fraction.
 inline VoxelizeSummary voxelizeFiles(const VoxelizeArgs& a, const spectra::Database& db, std::function<void(double)> progress,
                                      VoxelizeOptions* used = nullptr) {
@@ -87,6 +121,13 @@ inline VoxelizeSummary voxelizeFiles(const VoxelizeArgs& a, const spectra::Datab
     checkCount(a.dyes, files, "--dye");
     checkCount(a.concentrations, files, "--concentration");
     if (!a.grids.empty()) checkCount(a.grids, files, "--grid");
+    if (!a.offsets.empty()) checkCount(a.offsets, files, "--offset");
+    if (!a.rotations.empty()) checkCount(a.rotations, files, "--rotate");
+    std::vector<Placement> placements(files);
+    for (size_t i = 0; i < files; ++i) {
+        if (!a.offsets.empty()) placements[i].offsetUm = parseOffsetUm(perFile(a.offsets, i));
+        if (!a.rotations.empty()) placements[i].rotationsDeg = parseRotations(perFile(a.rotations, i));
+    }
     std::vector<Concentration> conc;
     for (const auto& c : a.concentrations) conc.push_back(parseConcentration(c));
     std::vector<std::string> dyeIds;
@@ -105,6 +146,7 @@ inline VoxelizeSummary voxelizeFiles(const VoxelizeArgs& a, const spectra::Datab
     for (size_t i = 0; i < files; ++i) {
         NeuronVolumeInput n;
         n.morphology = readSwc(a.swc[i]);
+        place(n.morphology, placements[i]);
         n.dye = dyeIds.size() == 1 ? dyeIds[0] : dyeIds[i];
         n.gridName = a.grids.empty() ? n.dye : perFile(a.grids, i);
         const Concentration& c = conc.size() == 1 ? conc[0] : conc[i];

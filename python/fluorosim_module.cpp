@@ -399,8 +399,11 @@ py::dict writeVolume(const fs::path& file, const py::dict& grids, const std::str
 // Paths as str or any os.PathLike (pathlib.Path), as Python users hold them.
 py::dict voxelizeSwc(const std::vector<fs::path>& swc, const std::string& voxel, const std::vector<std::string>& dyes,
                      const std::vector<std::string>& concentrations, const fs::path& output, const std::vector<std::string>& grids,
-                     const std::string& mode, const std::optional<std::string>& membraneThickness, int supersampling, int threads) {
+                     const std::string& mode, const std::optional<std::string>& membraneThickness, int supersampling, int threads,
+                     const std::vector<std::string>& offsets, const std::vector<std::string>& rotations) {
     optics::VoxelizeArgs a;
+    a.offsets = offsets;
+    a.rotations = rotations;
     for (const fs::path& f : swc) a.swc.push_back(f.string());
     a.voxel = voxel;
     a.dyes = dyes;
@@ -670,7 +673,9 @@ PYBIND11_MODULE(fluorosim, mod) {
     mod.def("voxelize", &voxelizeSwc, py::arg("swc"), py::kw_only(), py::arg("voxel"), py::arg("dyes"), py::arg("concentrations"),
             py::arg("output"), py::arg("grids") = std::vector<std::string>{}, py::arg("mode") = "filled",
             py::arg("membrane_thickness") = py::none(), py::arg("supersampling") = 4, py::arg("threads") = 0,
-            "Voxelize SWC neurons into an OpenVDB file, as `fluorosim voxelize` (one dye and concentration, or one per file). "
+            py::arg("offsets") = std::vector<std::string>{}, py::arg("rotations") = std::vector<std::string>{},
+            "Voxelize SWC neurons into an OpenVDB file, as `fluorosim voxelize` (one dye and concentration, or one per file; "
+            "offsets [\"100um,0um,0um\", ...] and rotations [\"z:90,x:15\", ...] place each neuron as --offset and --rotate do). "
             "Returns a dict: output, grids [{name, units, active_voxels, covered_volume_um3, analytic_volume_um3, max_value}], "
             "label_voxels, voxel_size_um, seconds.");
     mod.def("fit", &fitStack, py::arg("scene"), py::arg("stack"), py::kw_only(), py::arg("planes") = py::none(), py::arg("step") = py::none(),

@@ -71,6 +71,13 @@ void addVoxelizeCommand(CLI::App& app) {
         ->required()->allow_extra_args(false)->delimiter(',');
     cmd->add_option("--grid", args->grids, "Grid names: one, or one per SWC file; neurons sharing a name add up")
         ->allow_extra_args(false)->delimiter(',');
+    // Values hold commas: repeat the option, once for all files or once per file.
+    cmd->add_option("--offset", args->offsets, "Move each neuron by x,y,z with units, e.g. 100um,0um,-20um: one, or one per SWC file")
+        ->allow_extra_args(false);
+    cmd->add_option("--rotate", args->rotations,
+                    "Rotate each neuron about its soma before the offset, e.g. z:90,x:15 (degrees about x, y, z, in order): one, or one "
+                    "per SWC file")
+        ->allow_extra_args(false);
     cmd->add_option("--mode", args->mode, "filled (cytosolic label) or membrane");
     cmd->add_option("--membrane-thickness", args->membraneThickness, "Membrane shell thickness with a unit (default: one voxel)");
     cmd->add_option("--supersampling", args->supersampling, "Points per axis in voxels cut by the surface");

@@ -261,4 +261,24 @@ double medianRadiusUm(const Morphology& m) {
     return n % 2 ? r[n / 2] : 0.5 * (r[n / 2 - 1] + r[n / 2]);
 }
 
+void place(Morphology& m, const Placement& p) {
+    if (m.samples.empty()) return;
+    Vec3 pivot = m.samples.front().positionUm;
+    for (const SwcSample& s : m.samples)
+        if (s.parent == -1) {
+            pivot = s.positionUm;
+            break;
+        }
+    for (SwcSample& s : m.samples) {
+        Vec3 v = s.positionUm - pivot;
+        for (const auto& [axis, degrees] : p.rotationsDeg) {
+            const double a = degrees * std::numbers::pi / 180, c = std::cos(a), sn = std::sin(a);
+            if (axis == 'x') v = Vec3(v.x, c * v.y - sn * v.z, sn * v.y + c * v.z);
+            else if (axis == 'y') v = Vec3(c * v.x + sn * v.z, v.y, -sn * v.x + c * v.z);
+            else v = Vec3(c * v.x - sn * v.y, sn * v.x + c * v.y, v.z);
+        }
+        s.positionUm = pivot + v + p.offsetUm;
+    }
+}
+
 }  // namespace fluorosim

@@ -4,6 +4,7 @@
 // the soma and round cones (convex hulls of two end spheres) between samples. The analytic volume
 // and the voxelizer (volume/voxelize.h) use the same pieces, so they agree by construction.
 #include <string>
+#include <utility>
 #include <string_view>
 #include <vector>
 
@@ -33,6 +34,15 @@ constexpr int kSwcSomaType = 1;
 Morphology readSwc(const std::string& path);
 // The same on text already in memory; `source` names it in messages.
 Morphology parseSwc(std::string_view text, const std::string& source);
+
+// A rigid placement: rotations about axes x, y or z (degrees, right-handed, applied in order) about the
+// morphology's first root sample (its soma), then a translation (µm). Radii are kept.
+struct Placement {
+    std::vector<std::pair<char, double>> rotationsDeg;  // ('z', 90), ('x', 15), ...
+    Vec3 offsetUm;
+    bool identity() const { return rotationsDeg.empty() && offsetUm.x == 0 && offsetUm.y == 0 && offsetUm.z == 0; }
+};
+void place(Morphology& m, const Placement& p);
 
 // One piece of the surface model, in µm: a sphere (sphere = true, centre a, radius ra) or the
 // round cone spanned by the spheres (a, ra) and (b, rb).

@@ -136,6 +136,11 @@ def test_voxelize_writes_the_cli_grids(tmp_path):
     assert grid["covered_volume_um3"] == pytest.approx(grid["analytic_volume_um3"], rel=0.05)
     with pytest.raises(ValueError, match="--voxel"):
         fluorosim.voxelize(swc, voxel="-1um", dyes=["AF594"], concentrations=["10uM"], output=str(tmp_path / "x.vdb"))
+    # Two copies of the neuron in one grid: overlapping they add up; placed apart they do not.
+    two = dict(voxel="1um", dyes=["AF594"], concentrations=["10uM"], grids=["cells"])
+    (together,) = fluorosim.voxelize(swc * 2, output=tmp_path / "t.vdb", **two)["grids"]
+    (apart,) = fluorosim.voxelize(swc * 2, output=tmp_path / "a.vdb", offsets=["0um,0um,0um", "3mm,0um,0um"], rotations=["z:90"], **two)["grids"]
+    assert together["max_value"] == pytest.approx(20, rel=1e-6) and apart["max_value"] == pytest.approx(10, rel=1e-6)
 
 
 def test_the_spectral_database_as_arrays():

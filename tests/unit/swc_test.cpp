@@ -173,5 +173,21 @@ TEST(Swc, ReadsNeuroMorphoSamples) {
     EXPECT_EQ(readSwc(dir + "mp_ma_40984_gc2.CNG.swc").samples.size(), 353u);
 }
 
+TEST(Swc, PlacementRotatesAboutTheSomaThenMoves) {
+    Morphology m = parseSwc("1 1 5 5 5 2 -1\n2 3 15 5 5 1 1\n3 3 15 5 9 0.5 2\n", "inline");
+    const double before = analyticVolumeUm3(m);
+    Placement p;
+    p.rotationsDeg = {{'z', 90}, {'x', 90}};
+    p.offsetUm = Vec3(100, 0, -1);
+    place(m, p);
+    // (10, 0, 0) from the soma turns to (0, 10, 0) about z, then to (0, 0, 10) about x; (10, 0, 4) to (0, -4, 10).
+    auto near = [](const Vec3& a, const Vec3& b) { return std::abs(a.x - b.x) < 1e-12 && std::abs(a.y - b.y) < 1e-12 && std::abs(a.z - b.z) < 1e-12; };
+    EXPECT_TRUE(near(m.samples[0].positionUm, Vec3(105, 5, 4)));
+    EXPECT_TRUE(near(m.samples[1].positionUm, Vec3(105, 5, 14)));
+    EXPECT_TRUE(near(m.samples[2].positionUm, Vec3(105, 1, 14)));
+    EXPECT_EQ(m.samples[2].radiusUm, 0.5);
+    EXPECT_NEAR(analyticVolumeUm3(m), before, 1e-9 * before);
+}
+
 }  // namespace
 }  // namespace fluorosim

@@ -507,6 +507,36 @@ TEST(VoxelizeCli, TwoNeuronsTwoDyes) {
     EXPECT_EQ(gridNamed(shared, "cells").stringMetadata.at("mode"), "membrane");
 }
 
+// Two copies of one neuron in one grid overlap (twice the concentration) unless --offset places them
+// apart; --rotate turns a neuron about its soma.
+TEST(VoxelizeCli, OffsetAndRotationPlaceNeuronsApart) {
+    const CliDir dir;
+    const fs::path swc = dir.write("n.swc", "1 1 0 0 0 3 -1\n2 3 10 0 0 1 1\n3 3 10 8 0 1 2\n");
+    const fs::path out = dir.path() / "o.vdb";
+    auto stats = [&](const std::vector<std::string>& extra) {
+        std::vector<std::string> args{swc.string(), swc.string(), "--voxel", "0.5um", "--dye", "AF488", "--concentration", "10uM", "--grid", "cells",
+                                      "-o", out.string()};
+        args.insert(args.end(), extra.begin(), extra.end());
+        const CliRun r = dir.run(args);
+        EXPECT_EQ(r.exitCode, 0) << r.err;
+        return gridNamed(readVdbGridStats(out.string()), "cells");
+    };
+    const VdbGridStats overlapping = stats({});
+    const VdbGridStats apart = stats({"--offset", "0um,0um,0um", "--offset", "50um,0um,0um"});
+    const VdbGridStats turned = stats({"--offset", "0um,0um,0um", "--offset", "50um,0um,0um", "--rotate", "z:90,x:30"});
+    EXPECT_FLOAT_EQ(static_cast<float>(overlapping.max), 20.0f);
+    EXPECT_FLOAT_EQ(static_cast<float>(apart.max), 10.0f);
+    EXPECT_EQ(apart.activeVoxels, 2 * (overlapping.activeVoxels));
+    EXPECT_NEAR(turned.sum, apart.sum, 0.02 * apart.sum);  // the same dye, turned (voxel sampling differs)
+    const CliRun bad = dir.run({swc.string(), "--voxel", "0.5um", "--dye", "AF488", "--concentration", "10uM", "--rotate", "w:90", "-o", out.string()});
+    EXPECT_EQ(bad.exitCode, 2);
+    EXPECT_TRUE(contains(bad.err, "--rotate") && contains(bad.err, "w:90")) << bad.err;
+    const CliRun badOffset = dir.run({swc.string(), "--voxel", "0.5um", "--dye", "AF488", "--concentration", "10uM", "--offset", "1um,2um", "-o",
+                                      out.string()});
+    EXPECT_EQ(badOffset.exitCode, 2);
+    EXPECT_TRUE(contains(badOffset.err, "--offset") && contains(badOffset.err, "1um,2um")) << badOffset.err;
+}
+
 TEST(VoxelizeCli, BadInputNamesTheValue) {
     const CliDir dir;
     const fs::path swc = dir.write("n.swc", "1 1 0 0 0 3 -1\n2 3 10 0 0 1 1\n");
