@@ -535,14 +535,14 @@ void storePlane(Stack& stack, const Microscope& m, size_t slot, int plane, const
 
 AutoExposure autoExpose(Stack& stack, Microscope& m, double fraction, uint64_t seed) {
     if (!(fraction > 0 && fraction <= 1)) throw ConfigError("--exposure auto: the full-well fraction must lie in (0, 1], got " + std::to_string(fraction));
-    const double dark = m.detector.darkCurrentElectronsPerS * m.detector.exposureS;
+    const std::vector<double> dark = Detector(m.detector).expectedElectrons(std::vector<double>(static_cast<size_t>(stack.width) * stack.height, 0.0));
     double reliable = 0, any = 0;
     for (size_t slot = 0; slot < stack.channels.size(); ++slot)
         for (int k = 0; k < stack.planes; ++k) {
             if (!stack.done[stack.index(slot, k)]) continue;
             const size_t off = stack.pixelOffset(slot, k);
             for (size_t i = 0; i < static_cast<size_t>(stack.width) * stack.height; ++i) {
-                const double signal = stack.expected[off + i] - dark;
+                const double signal = stack.expected[off + i] - dark[i];
                 any = std::max(any, signal);
                 if (stack.stderrElectrons[off + i] <= 0.25 * signal) reliable = std::max(reliable, signal);
             }
@@ -560,7 +560,7 @@ AutoExposure autoExpose(Stack& stack, Microscope& m, double fraction, uint64_t s
             if (!stack.done[stack.index(slot, k)]) continue;
             const size_t off = stack.pixelOffset(slot, k), n = static_cast<size_t>(stack.width) * stack.height;
             std::vector<double> signal(n);
-            for (size_t i = 0; i < n; ++i) signal[i] = (stack.expected[off + i] - dark) * a.factor;
+            for (size_t i = 0; i < n; ++i) signal[i] = (stack.expected[off + i] - dark[i]) * a.factor;
             const std::vector<double> withDark = camera.expectedElectrons(signal);
             const std::vector<uint16_t> frame = camera.readOut(withDark, seed, planeStreamKey(m.channels[stack.channels[slot]].name, k));
             for (size_t i = 0; i < n; ++i) {

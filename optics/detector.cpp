@@ -146,9 +146,55 @@ void DetectorOptions::validate() const {
     // (times the scale): maxValue() < 0 means a negative scale, > 1 a QE above 1 somewhere.
     const double qeMax = qe.maxValue();
     if (!(qeMax >= 0 && qeMax <= 1)) reject("qe", "max " + num(qeMax), "quantum efficiency must lie in [0, 1]");
+    const size_t pixels = mapPixels();
+    if (pixels > 0 && (sensorWidth <= 0 || pixels % static_cast<size_t>(sensorWidth) != 0))
+        reject("sensorWidth", std::to_string(sensorWidth), ("the maps' " + std::to_string(pixels) + " pixels are not whole rows of it").c_str());
+    for (size_t i = 0; i < offsetMapAdu.size(); ++i)
+        if (!(offsetMapAdu[i] >= 0 && offsetMapAdu[i] <= adcMax())) reject("offsetMapAdu", "pixel " + std::to_string(i) + " = " + num(offsetMapAdu[i]), "must lie in the ADC range");
+    for (size_t i = 0; i < gainMapElectronsPerAdu.size(); ++i)
+        if (!(gainMapElectronsPerAdu[i] > 0) || !std::isfinite(gainMapElectronsPerAdu[i]))
+            reject("gainMapElectronsPerAdu", "pixel " + std::to_string(i) + " = " + num(gainMapElectronsPerAdu[i]), "must be > 0 e-/ADU");
+    for (size_t i = 0; i < readNoiseMapElectrons.size(); ++i)
+        if (!(readNoiseMapElectrons[i] >= 0) || !std::isfinite(readNoiseMapElectrons[i]))
+            reject("readNoiseMapElectrons", "pixel " + std::to_string(i) + " = " + num(readNoiseMapElectrons[i]), "must be >= 0 e-");
+    for (size_t i = 0; i < darkCurrentMapElectronsPerS.size(); ++i)
+        if (!(darkCurrentMapElectronsPerS[i] >= 0) || !std::isfinite(darkCurrentMapElectronsPerS[i]))
+            reject("darkCurrentMapElectronsPerS", "pixel " + std::to_string(i) + " = " + num(darkCurrentMapElectronsPerS[i]), "must be >= 0 e-/s");
+    requireNonNegative("rowNoiseElectrons", rowNoiseElectrons, "must be >= 0 e-");
+    if (rowNoiseElectrons > 0 && sensorWidth <= 0) reject("rowNoiseElectrons", num(rowNoiseElectrons), "needs the sensor's width (sensorWidth)");
+    if (!(hotPixelFraction >= 0 && hotPixelFraction <= 1)) reject("hotPixelFraction", num(hotPixelFraction), "must lie in [0, 1]");
+    requireNonNegative("hotPixelDarkCurrentElectronsPerS", hotPixelDarkCurrentElectronsPerS, "must be >= 0 e-/s");
+}
+
+size_t DetectorOptions::mapPixels() const {
+    size_t n = 0;
+    for (const std::vector<double>* map : {&offsetMapAdu, &gainMapElectronsPerAdu, &readNoiseMapElectrons, &darkCurrentMapElectronsPerS}) {
+        if (map->empty()) continue;
+        if (n != 0 && map->size() != n)
+            throw ConfigError("detector: the calibration maps differ in size (" + std::to_string(n) + " and " + std::to_string(map->size()) + " pixels)");
+        n = map->size();
+    }
+    return n;
+}
+
+bool DetectorOptions::hotPixel(size_t pixel) const {
+    if (!(hotPixelFraction > 0)) return false;
+    Rng rng = Rng::forKey(hotPixelSeed, pixel, 0x686f74ULL);  // a fixed pattern: the same in every frame and run
+    return rng.uniform() < hotPixelFraction;
+}
+
+double DetectorOptions::darkCurrentAt(size_t pixel) const {
+    if (hotPixel(pixel)) return hotPixelDarkCurrentElectronsPerS;
+    return darkCurrentMapElectronsPerS.empty() ? darkCurrentElectronsPerS : darkCurrentMapElectronsPerS[pixel];
 }
 
 Detector::Detector(DetectorOptions options) : options_(std::move(options)) { options_.validate(); }
+
+void Detector::checkMapSize(size_t pixels) const {
+    const size_t maps = options_.mapPixels();
+    if (maps != 0 && maps != pixels)
+        throw ConfigError("detector: an image of " + std::to_string(pixels) + " pixels on calibration maps of " + std::to_string(maps));
+}
 
 std::vector<double> Detector::photoelectrons(const std::vector<double>& photonsPerPixel, double lambdaNm) const {
     if (!std::isfinite(lambdaNm) || !(lambdaNm > 0))
@@ -162,18 +208,29 @@ std::vector<double> Detector::photoelectrons(const std::vector<double>& photonsP
 
 std::vector<double> Detector::expectedElectrons(const std::vector<double>& photoelectronsPerPixel) const {
     checkCounts(photoelectronsPerPixel, "photoelectron count");
-    const double dark = options_.darkCurrentElectronsPerS * options_.exposureS;
+    checkMapSize(photoelectronsPerPixel.size());
     std::vector<double> out(photoelectronsPerPixel.size());
-    for (size_t i = 0; i < out.size(); ++i) out[i] = photoelectronsPerPixel[i] + dark;
+    for (size_t i = 0; i < out.size(); ++i) out[i] = photoelectronsPerPixel[i] + options_.darkCurrentAt(i) * options_.exposureS;
     return out;
 }
 
 std::vector<uint16_t> Detector::readOut(const std::vector<double>& expectedElectrons, uint64_t seed, uint64_t frame) const {
     checkCounts(expectedElectrons, "expected electron count");
+    checkMapSize(expectedElectrons.size());
     const DetectorOptions& o = options_;
     const bool em = o.type == SensorType::Emccd && o.emGain > 1;
     const double adcMax = o.adcMax();
     std::vector<uint16_t> out(expectedElectrons.size());
+    // Row noise: one offset per row and frame, from the row's own stream (keys beyond any pixel's).
+    std::vector<double> rowOffset;
+    if (o.rowNoiseElectrons > 0) {
+        const size_t rows = (out.size() + static_cast<size_t>(o.sensorWidth) - 1) / static_cast<size_t>(o.sensorWidth);
+        rowOffset.resize(rows);
+        for (size_t r = 0; r < rows; ++r) {
+            Rng rng = Rng::forKey(seed, (uint64_t(1) << 62) + r, frame);
+            rowOffset[r] = o.rowNoiseElectrons * sampleStandardNormal(rng);
+        }
+    }
     // Blocks of pixels run in parallel; each pixel has its own keyed stream, so the blocking and the
     // thread count do not change the result.
     constexpr size_t kBlock = 1 << 14;
@@ -184,8 +241,9 @@ std::vector<uint16_t> Detector::readOut(const std::vector<double>& expectedElect
             Rng rng = Rng::forKey(seed, i, frame);
             double electrons = std::min(samplePoisson(expectedElectrons[i], rng), o.fullWellElectrons);
             if (em && electrons > 0) electrons = sampleGamma(electrons, o.emGain, rng);
-            if (o.readNoiseElectrons > 0) electrons += o.readNoiseElectrons * sampleStandardNormal(rng);
-            const double adu = std::clamp(std::floor(electrons / o.gainElectronsPerAdu + o.offsetAdu + 0.5), 0.0, adcMax);
+            if (const double read = o.readNoiseAt(i); read > 0) electrons += read * sampleStandardNormal(rng);
+            if (!rowOffset.empty()) electrons += rowOffset[i / static_cast<size_t>(o.sensorWidth)];
+            const double adu = std::clamp(std::floor(electrons / o.gainAt(i) + o.offsetAt(i) + 0.5), 0.0, adcMax);
             out[i] = static_cast<uint16_t>(adu);
         }
     });
@@ -194,12 +252,12 @@ std::vector<uint16_t> Detector::readOut(const std::vector<double>& expectedElect
 
 std::vector<double> Detector::expectedAdu(const std::vector<double>& expectedElectrons) const {
     checkCounts(expectedElectrons, "expected electron count");
+    checkMapSize(expectedElectrons.size());
     const DetectorOptions& o = options_;
     const double m = o.type == SensorType::Emccd ? o.emGain : 1.0;
     std::vector<double> out(expectedElectrons.size());
     for (size_t i = 0; i < out.size(); ++i)
-        out[i] = std::clamp(std::min(expectedElectrons[i], o.fullWellElectrons) * m / o.gainElectronsPerAdu + o.offsetAdu, 0.0,
-                            o.adcMax());
+        out[i] = std::clamp(std::min(expectedElectrons[i], o.fullWellElectrons) * m / o.gainAt(i) + o.offsetAt(i), 0.0, o.adcMax());
     return out;
 }
 

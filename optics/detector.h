@@ -48,10 +48,31 @@ struct DetectorOptions {
     int bitDepth = 16;  // 8..16; ADU values are clipped to [0, 2^bitDepth - 1]
     double emGain = 1;  // EMCCD multiplication gain M >= 1 (must be 1 for sCMOS)
 
+    // sCMOS pixels are not alike. Per-pixel calibration maps, row-major from the top over the sensor's
+    // `sensorWidth` columns, as cameras ship them (offset in ADU, conversion gain in e-/ADU, read noise in
+    // e- rms, dark current in e-/s); an empty map is the scalar above for every pixel.
+    std::vector<double> offsetMapAdu, gainMapElectronsPerAdu, readNoiseMapElectrons, darkCurrentMapElectronsPerS;
+    int sensorWidth = 0;               // columns (needed by the maps and the row noise)
+    double rowNoiseElectrons = 0;      // rms of an offset shared by the pixels of a row in each frame
+    // Hot pixels: this fraction of pixels, a fixed pattern chosen by `hotPixelSeed`, have the dark current
+    // `hotPixelDarkCurrentElectronsPerS` instead of their own.
+    double hotPixelFraction = 0;
+    double hotPixelDarkCurrentElectronsPerS = 0;
+    uint64_t hotPixelSeed = 1;
+
+    double offsetAt(size_t pixel) const { return offsetMapAdu.empty() ? offsetAdu : offsetMapAdu[pixel]; }
+    double gainAt(size_t pixel) const { return gainMapElectronsPerAdu.empty() ? gainElectronsPerAdu : gainMapElectronsPerAdu[pixel]; }
+    double readNoiseAt(size_t pixel) const { return readNoiseMapElectrons.empty() ? readNoiseElectrons : readNoiseMapElectrons[pixel]; }
+    bool hotPixel(size_t pixel) const;
+    double darkCurrentAt(size_t pixel) const;
+    // The maps' pixel count (0 without maps); ConfigError unless every map has it.
+    size_t mapPixels() const;
+
     // Throws ConfigError naming the field and its value for: non-positive or non-finite pixel pitch,
     // exposure, gain or full well; a bit depth outside 8..16; negative read noise or dark current;
     // an offset outside [0, 2^bitDepth - 1]; a QE outside [0, 1] or with spectral lines; emGain < 1,
-    // or emGain != 1 on an sCMOS sensor.
+    // or emGain != 1 on an sCMOS sensor; maps of unequal sizes, not whole rows of `sensorWidth`, or with
+    // a value the scalar would refuse; row noise without `sensorWidth`; a hot-pixel fraction outside [0, 1].
     void validate() const;
     double adcMax() const { return std::ldexp(1.0, bitDepth) - 1.0; }  // 2^bitDepth - 1
 };
@@ -71,9 +92,10 @@ public:
     // plus dark current * exposure. This is the input of readOut and expectedAdu.
     std::vector<double> expectedElectrons(const std::vector<double>& photoelectronsPerPixel) const;
 
-    // One noisy frame. Each pixel draws from Rng::forKey(seed, pixel, frame), so the result depends
-    // only on (seed, frame, pixel) and not on threading; use the frame index for a stack taken with
-    // one seed. Throws NumericError for a negative or non-finite expected count (naming the pixel).
+    // One noisy frame. Each pixel draws from Rng::forKey(seed, pixel, frame), and each row's offset from
+    // its own key, so the result depends only on (seed, frame, pixel) and not on threading; use the frame
+    // index for a stack taken with one seed. Throws NumericError for a negative or non-finite expected
+    // count (naming the pixel), ConfigError for an image of another size than the maps'.
     std::vector<uint16_t> readOut(const std::vector<double>& expectedElectrons, uint64_t seed, uint64_t frame = 0) const;
 
     // The noise-free image in ADU, not rounded: min(e, fullWell) * M / gain + offset, clipped to the
@@ -83,6 +105,7 @@ public:
     std::vector<double> expectedAdu(const std::vector<double>& expectedElectrons) const;
 
 private:
+    void checkMapSize(size_t pixels) const;
     DetectorOptions options_;
 };
 

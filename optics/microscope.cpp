@@ -2,11 +2,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <set>
 
 #include "core/errors.h"
 #include "core/message.h"
 #include "database.h"
+#include "optics/ome_tiff.h"
 
 namespace fluorosim::optics {
 namespace {
@@ -74,7 +76,8 @@ Filter parseFilter(const SceneField& f, const spectra::Database& db) {
 
 DetectorOptions parseDetector(const SceneField& d) {
     d.allowOnly({"type", "pixel_pitch", "width", "height", "qe", "exposure_s", "gain_e_per_adu", "offset_adu", "read_noise_e",
-                 "dark_current_e_per_s", "full_well_e", "bit_depth", "em_gain"});
+                 "dark_current_e_per_s", "full_well_e", "bit_depth", "em_gain", "offset_map", "gain_map", "read_noise_map", "dark_current_map",
+                 "row_noise_e", "hot_pixel_fraction", "hot_pixel_dark_e_per_s", "hot_pixel_seed"});
     DetectorOptions o;
     if (d.has("type")) {
         const std::string t = d.at("type").str();
@@ -91,6 +94,34 @@ DetectorOptions parseDetector(const SceneField& d) {
     if (d.has("full_well_e")) o.fullWellElectrons = d.at("full_well_e").number();
     if (d.has("bit_depth")) o.bitDepth = static_cast<int>(d.at("bit_depth").integer(8, 16));
     if (d.has("em_gain")) o.emGain = d.at("em_gain").number();
+    if (d.has("width")) o.sensorWidth = static_cast<int>(d.at("width").integer(1, 8192));
+    // Calibration maps: one-page TIFF files (float32 or uint16) of the sensor's width x height, relative to
+    // the scene file.
+    auto map = [&](const char* key, std::vector<double>& out) {
+        if (!d.has(key)) return;
+        const SceneField f = d.at(key);
+        const std::filesystem::path path = f.file().parent_path() / f.str();
+        TiffStackInfo tiff;
+        try {
+            tiff = readTiffStack(path, true);
+        } catch (const IoError& e) {
+            throw IoError(f.prefix() + e.what());
+        }
+        const int height = d.has("height") ? static_cast<int>(d.at("height").integer(1, 8192)) : 0;
+        if (tiff.pages != 1 || tiff.width != o.sensorWidth || tiff.height != height)
+            f.failQuoted("the map " + path.string() + " is " + std::to_string(tiff.width) + " x " + std::to_string(tiff.height) + " pixels in " +
+                         std::to_string(tiff.pages) + " pages; the sensor is " + std::to_string(o.sensorWidth) + " x " + std::to_string(height) +
+                         " (one page)");
+        out = std::move(tiff.pixels);
+    };
+    map("offset_map", o.offsetMapAdu);
+    map("gain_map", o.gainMapElectronsPerAdu);
+    map("read_noise_map", o.readNoiseMapElectrons);
+    map("dark_current_map", o.darkCurrentMapElectronsPerS);
+    if (d.has("row_noise_e")) o.rowNoiseElectrons = d.at("row_noise_e").number();
+    if (d.has("hot_pixel_fraction")) o.hotPixelFraction = d.at("hot_pixel_fraction").number(0, 1);
+    if (d.has("hot_pixel_dark_e_per_s")) o.hotPixelDarkCurrentElectronsPerS = d.at("hot_pixel_dark_e_per_s").number();
+    if (d.has("hot_pixel_seed")) o.hotPixelSeed = static_cast<uint64_t>(d.at("hot_pixel_seed").integer(0, int64_t(1) << 53));
     try {
         o.validate();
     } catch (const ConfigError& e) {
@@ -263,6 +294,12 @@ void Microscope::validate(const Scene& scene) const {
     detector.validate();
     if (width < 1 || height < 1 || width > 8192 || height > 8192)
         throw ConfigError("detector width and height must lie in [1, 8192], got " + std::to_string(width) + " x " + std::to_string(height));
+    const size_t maps = detector.mapPixels();
+    if ((maps != 0 || detector.rowNoiseElectrons > 0) &&
+        (detector.sensorWidth != width || (maps != 0 && maps != static_cast<size_t>(width) * static_cast<size_t>(height))))
+        throw ConfigError("the detector's calibration maps and row noise are for a sensor " + std::to_string(detector.sensorWidth) +
+                          " pixels wide (maps of " + std::to_string(maps) + " pixels); the microscope images " + std::to_string(width) + " x " +
+                          std::to_string(height));
     if (stack.planes < 1 || stack.planes > 4096) throw ConfigError("stack planes must lie in [1, 4096], got " + std::to_string(stack.planes));
     if (!(stack.stepMm > 0) || !std::isfinite(stack.stepMm)) throw ConfigError("stack step must be positive, got " + num(stack.stepMm) + " mm");
     if (channels.empty()) throw ConfigError("the microscope has no channel");

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "core/errors.h"
+#include "core/math.h"
 #include "core/rng.h"
 #include "optics/detector.h"
 #include "optics/photon_transfer.h"
@@ -188,6 +189,92 @@ void expectRejected(const std::function<void(DetectorOptions&)>& change, const s
         EXPECT_NE(msg.find(value), std::string::npos) << msg;
     }
     EXPECT_THROW(Detector{o}, ConfigError);
+}
+
+// sCMOS pixels as cameras calibrate them: per-pixel offset, gain and read noise (mean and variance of
+// each pixel over many frames against its own values, 4 standard errors), hot pixels as a fixed
+// pattern, and row noise shared by a row's pixels.
+TEST(Detector, CalibrationMapsHotPixelsAndRowNoise) {
+    DetectorOptions o;
+    o.sensorWidth = 8;
+    o.darkCurrentElectronsPerS = 0;
+    for (int i = 0; i < 32; ++i) {
+        o.offsetMapAdu.push_back(100 + i);
+        o.gainMapElectronsPerAdu.push_back(0.4 + 0.01 * i);
+        o.readNoiseMapElectrons.push_back(1.0 + 0.1 * i);
+    }
+    const Detector camera(o);
+    const int frames = 4000;
+    for (double e : {0.0, 50.0}) {
+        std::vector<double> sum(32, 0.0), sumSq(32, 0.0);
+        for (int f = 0; f < frames; ++f) {
+            const std::vector<uint16_t> adu = camera.readOut(std::vector<double>(32, e), 7, static_cast<uint64_t>(f));
+            for (int i = 0; i < 32; ++i) {
+                sum[i] += adu[i];
+                sumSq[i] += double(adu[i]) * adu[i];
+            }
+        }
+        double worstMean = 0, worstVar = 0;
+        for (int i = 0; i < 32; ++i) {
+            const double g = o.gainMapElectronsPerAdu[i], rn = o.readNoiseMapElectrons[i];
+            const double mean = sum[i] / frames, var = sumSq[i] / frames - mean * mean;
+            const double expectedVar = (e + rn * rn) / (g * g) + 1.0 / 12;  // shot and read noise, and rounding
+            worstMean = std::max(worstMean, std::abs(mean - (e / g + o.offsetMapAdu[i])) / std::sqrt(expectedVar / frames));
+            worstVar = std::max(worstVar, std::abs(var - expectedVar) / (expectedVar * std::sqrt(2.0 / frames)));
+        }
+        std::printf("  %g e-: per-pixel mean and variance against their maps, largest |z| %.2f and %.2f\n", e, worstMean, worstVar);
+        EXPECT_LT(worstMean, 4.5);
+        EXPECT_LT(worstVar, 4.5);
+    }
+    EXPECT_THROW(camera.readOut(std::vector<double>(16, 0.0), 1), ConfigError);  // not the maps' size
+
+    // Hot pixels: a fixed pattern of the asked fraction, with their own dark current.
+    DetectorOptions hot;
+    hot.sensorWidth = 100;
+    hot.hotPixelFraction = 0.05;
+    hot.hotPixelDarkCurrentElectronsPerS = 200;
+    hot.exposureS = 0.1;
+    const std::vector<double> dark = Detector(hot).expectedElectrons(std::vector<double>(10000, 0.0));
+    size_t count = 0;
+    for (size_t i = 0; i < dark.size(); ++i) {
+        const bool isHot = hot.hotPixel(i);
+        count += isHot;
+        EXPECT_DOUBLE_EQ(dark[i], (isHot ? 200 : hot.darkCurrentElectronsPerS) * 0.1);
+    }
+    EXPECT_NEAR(double(count), 500, 4 * std::sqrt(10000 * 0.05 * 0.95));
+    DetectorOptions other = hot;
+    other.hotPixelSeed = 2;
+    size_t same = 0;
+    for (size_t i = 0; i < 10000; ++i) same += hot.hotPixel(i) && other.hotPixel(i);
+    EXPECT_LT(same, 60u);  // another camera, another pattern (25 expected by chance)
+
+    // Row noise: an offset per row and frame, the same for the row's pixels.
+    DetectorOptions rows;
+    rows.sensorWidth = 64;
+    rows.readNoiseElectrons = 0;
+    rows.darkCurrentElectronsPerS = 0;
+    rows.rowNoiseElectrons = 3;
+    rows.gainElectronsPerAdu = 0.25;
+    double withinRow = 0, rowMeans = 0, rowMeansSq = 0;
+    const int rowCount = 64 * 50;
+    for (int f = 0; f < 50; ++f) {
+        const std::vector<uint16_t> adu = Detector(rows).readOut(std::vector<double>(64 * 64, 0.0), 3, static_cast<uint64_t>(f));
+        for (int r = 0; r < 64; ++r) {
+            double m = 0;
+            for (int x = 0; x < 64; ++x) m += adu[static_cast<size_t>(r * 64 + x)];
+            m /= 64;
+            for (int x = 0; x < 64; ++x) withinRow = std::max(withinRow, std::abs(adu[static_cast<size_t>(r * 64 + x)] - m));
+            rowMeans += m;
+            rowMeansSq += m * m;
+        }
+    }
+    const double rowVar = rowMeansSq / rowCount - sqr(rowMeans / rowCount), expected = sqr(3 / 0.25);
+    std::printf("  row noise 3 e-: variance of row means %.1f ADU^2 (expected %.1f), largest spread within a row %.1f ADU\n", rowVar, expected,
+                withinRow);
+    EXPECT_NEAR(rowVar, expected, 4 * expected * std::sqrt(2.0 / rowCount) + 1.0 / 12);
+    EXPECT_LE(withinRow, 1.0);  // only the rounding of one value
+    rows.sensorWidth = 0;
+    EXPECT_THROW(rows.validate(), ConfigError);
 }
 
 TEST(Detector, RejectsBadOptions) {

@@ -95,6 +95,27 @@ def test_acquire_sets_the_exposure_as_the_cli_does(tmp_path):
         fluorosim.acquire(str(scene), planes=1, spp=1, exposure="auto:2")
 
 
+def test_acquire_reads_the_cameras_calibration_maps(tmp_path):
+    # An sCMOS offset map (100 + column) and gain map as TIFF files, as cameras ship their calibration.
+    offset = np.tile(100.0 + np.arange(16, dtype=np.float32), (16, 1)).astype(np.float32)
+    gain = np.full((16, 16), 0.5, dtype=np.float32)
+    tifffile.imwrite(tmp_path / "offset.tif", offset)
+    tifffile.imwrite(tmp_path / "gain.tif", gain)
+    scene = beads()
+    scene["microscope"]["detector"].update(offset_map=str(tmp_path / "offset.tif"), gain_map=str(tmp_path / "gain.tif"),
+                                           hot_pixel_fraction=0.05, hot_pixel_dark_e_per_s=5000)
+    stack = fluorosim.acquire(scene, planes=1, spp=1, seed=2)
+    counts, expected = stack["counts"][0, 0].astype(float), stack["expected"][0, 0]
+    residual = counts - expected / 0.5 - offset  # shot and read noise: mean 0, per pixel sqrt(e + 1.4^2) / 0.5 ADU
+    assert abs(residual.mean()) < 4 * np.sqrt(((expected + 1.4 ** 2) / 0.25 + 1 / 12).sum()) / residual.size
+    hot = expected > 5000 * 0.01 * 0.5  # the hot pixels' dark electrons (5000 e-/s over the 10 ms exposure)
+    assert 0 < hot.sum() < 40
+    scene["microscope"]["detector"]["gain_map"] = str(tmp_path / "small.tif")
+    tifffile.imwrite(tmp_path / "small.tif", gain[:8])
+    with pytest.raises(ValueError, match="gain_map.*16 x 8 pixels"):
+        fluorosim.acquire(scene, planes=1, spp=1)
+
+
 def test_acquire_takes_the_cli_estimator_options(tmp_path):
     scene = tmp_path / "beads.json"
     scene.write_text(json.dumps(beads()))
