@@ -147,6 +147,8 @@ inline VoxelizeSummary voxelizeFiles(const VoxelizeArgs& a, const spectra::Datab
         NeuronVolumeInput n;
         n.morphology = readSwc(a.swc[i]);
         place(n.morphology, placements[i]);
+        n.swcPath = std::filesystem::absolute(a.swc[i]).lexically_normal().string();
+        n.placement = placements[i];
         n.dye = dyeIds.size() == 1 ? dyeIds[0] : dyeIds[i];
         n.gridName = a.grids.empty() ? n.dye : perFile(a.grids, i);
         const Concentration& c = conc.size() == 1 ? conc[0] : conc[i];

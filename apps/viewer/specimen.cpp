@@ -9,7 +9,9 @@
 #include "core/errors.h"
 #include "core/parallel.h"
 #include "core/units.h"
+#include "optics/voxelize_request.h"
 #include "scene/scene_field.h"
+#include "volume/voxelize.h"
 
 namespace fluorosim::viewer {
 namespace fs = std::filesystem;
@@ -88,7 +90,7 @@ Specimen loadSpecimen(const Scene& scene, const fs::path& sceneFile, const Speci
     // The loaded scene keeps neither file names nor the dyes' names as written: read them again.
     const SceneField json = SceneField::parse(readText(sceneFile), "", sceneFile);
     std::optional<Affine> swcPlacement;  // world µm from SWC µm, for SWCs voxelized into the grid
-    fs::path volumeDir;
+    fs::path volumeDir, volumeFile;
     std::map<const Medium*, std::vector<int>> mediumChannels;
     for (const Medium& m : scene.media) {
         const VolumeFields* volume = m.volume();
@@ -104,6 +106,7 @@ Specimen loadSpecimen(const Scene& scene, const fs::path& sceneFile, const Speci
         const SceneField volumeField = medium.at("volume");
         const fs::path file = sceneFile.parent_path() / volumeField.at("file").str();
         volumeDir = file.parent_path();
+        volumeFile = file;
         s.gridMedium = m.name();
         const SceneField dyes = medium.at("dyes");
         for (size_t i = 0; i < m.dyes().size(); ++i) {
@@ -143,11 +146,46 @@ Specimen loadSpecimen(const Scene& scene, const fs::path& sceneFile, const Speci
         }
         s.shapes.push_back(std::move(d));
     }
-    std::vector<fs::path> swc = options.swc;
-    if (swc.empty() && options.findSwc) swc = swcFilesIn(volumeDir.empty() ? sceneFile.parent_path() : volumeDir);
+    // Which neurons: the explicit files; else the ones the volume's label grid names (fluorosim voxelize
+    // records each neuron's SWC file and placement); else every SWC file beside the volume (or scene).
+    std::vector<std::pair<fs::path, Placement>> swc;
+    for (const fs::path& f : options.swc) swc.emplace_back(f, Placement{});
+    if (swc.empty() && options.findSwc) {
+        std::string named;
+        if (!volumeFile.empty())
+            for (const VdbGridStats& g : readVdbGridStats(volumeFile.string())) {
+                if (g.name != "label") continue;
+                for (int label = 1; g.stringMetadata.count("label_" + std::to_string(label) + "_swc"); ++label) {
+                    const std::string key = "label_" + std::to_string(label);
+                    fs::path file = g.stringMetadata.at(key + "_swc");
+                    if (!fs::exists(file) && fs::exists(volumeDir / file.filename())) file = volumeDir / file.filename();
+                    if (!fs::exists(file)) {
+                        s.notes.push_back("neuron " + std::to_string(label) + " of the volume: " + file.string() + " not found, not drawn");
+                        continue;
+                    }
+                    Placement p;
+                    if (g.stringMetadata.count(key + "_offset")) p.offsetUm = optics::parseOffsetUm(g.stringMetadata.at(key + "_offset"));
+                    if (g.stringMetadata.count(key + "_rotate")) p.rotationsDeg = optics::parseRotations(g.stringMetadata.at(key + "_rotate"));
+                    swc.emplace_back(file, p);
+                    named += (named.empty() ? "" : ", ") + file.filename().string() + " (label " + std::to_string(label) + ")";
+                }
+            }
+        if (!named.empty()) s.notes.push_back("neurons drawn: the volume's " + named);
+        else {
+            for (const fs::path& f : swcFilesIn(volumeDir.empty() ? sceneFile.parent_path() : volumeDir)) {
+                swc.emplace_back(f, Placement{});
+                named += (named.empty() ? "" : ", ") + f.filename().string();
+            }
+            if (!named.empty())
+                s.notes.push_back("neurons drawn: every SWC file beside the volume (" + named +
+                                  "; the volume does not name its neurons: voxelize it again, or pass --swc)");
+        }
+    }
     const Affine placement = swcPlacement.value_or(Affine());  // SWC µm are world µm without a grid
-    for (const fs::path& f : swc) {
-        NeuronModel n = neuronFromSwc(readSwc(f.string()), placement);
+    for (const auto& [f, p] : swc) {
+        Morphology m = readSwc(f.string());
+        place(m, p);
+        NeuronModel n = neuronFromSwc(m, placement);
         n.channel = neuronChannel(s, n);
         s.neurons.push_back(std::move(n));
     }

@@ -59,8 +59,9 @@ struct Specimen {
 };
 
 struct SpecimenOptions {
-    // SWC files: explicit ones, or (when `findSwc`) every *.swc beside the grid medium's volume file,
-    // else beside the scene file.
+    // SWC files: explicit ones, or (when `findSwc`) the neurons the grid medium's volume names in its
+    // label grid (with their placement), else every *.swc beside the volume file, else beside the scene
+    // file. The specimen's notes say which.
     std::vector<std::filesystem::path> swc;
     bool findSwc = true;
 };

@@ -557,8 +557,21 @@ VoxelizeSummary writeVoxelizedVdb(const std::string& path, const std::vector<Neu
     label->setTransform(transform->copy());
     label->insertMeta("length_unit", openvdb::StringMetadata("mm"));
     label->insertMeta("mode", openvdb::StringMetadata(labelModeName(options.mode)));
-    for (const NeuronVolumeInput& n : neurons)
-        label->insertMeta("label_" + std::to_string(n.label), openvdb::StringMetadata(n.morphology.source + " (grid " + n.gridName + ")"));
+    for (const NeuronVolumeInput& n : neurons) {
+        const std::string key = "label_" + std::to_string(n.label);
+        label->insertMeta(key, openvdb::StringMetadata(n.morphology.source + " (grid " + n.gridName + ")"));
+        if (!n.swcPath.empty()) label->insertMeta(key + "_swc", openvdb::StringMetadata(n.swcPath));
+        if (!n.placement.identity()) {
+            std::ostringstream offset, rotate;
+            offset.precision(17);
+            offset << n.placement.offsetUm.x << "um," << n.placement.offsetUm.y << "um," << n.placement.offsetUm.z << "um";
+            label->insertMeta(key + "_offset", openvdb::StringMetadata(offset.str()));
+            rotate.precision(17);
+            for (size_t r = 0; r < n.placement.rotationsDeg.size(); ++r)
+                rotate << (r ? "," : "") << n.placement.rotationsDeg[r].first << ':' << n.placement.rotationsDeg[r].second;
+            if (!n.placement.rotationsDeg.empty()) label->insertMeta(key + "_rotate", openvdb::StringMetadata(rotate.str()));
+        }
+    }
     fillTree(*label, v.labels, [](const LabelBlock& b) { return b.uniformLabel; }, [](const LabelBlock& b) { return b.label.get(); });
     BlockMap<LabelBlock>().swap(v.labels);
     grids.push_back(label);

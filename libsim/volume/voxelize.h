@@ -46,6 +46,10 @@ struct NeuronVolumeInput {
     std::string units = "uM";    // stored as the grid's "units" metadata
     int label = 1;               // value in the "label" grid, > 0
     std::string dye;             // optional, stored as the grid's "dye" metadata
+    // Where the neuron came from, stored in the label grid's metadata so that a viewer draws exactly the
+    // volume's neurons: its SWC file and the placement already applied to `morphology`.
+    std::string swcPath;
+    Placement placement;
 };
 
 struct VoxelizedNeuronSummary {

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "optics/scene_files.h"
+#include "optics/voxelize_request.h"
 #include "io/image_io.h"
 #include "support/fluorescent_scenes.h"
 #include "viewer/microscope_overlay.h"
@@ -226,6 +227,36 @@ TEST(ViewerData, SwcBesideTheVolumeIsPlacedLikeTheGrid) {
     EXPECT_NEAR(tip.aUm.x, 34, 1e-9);
     EXPECT_NEAR(tip.bUm.x, 38, 1e-9);
     EXPECT_NEAR(tip.rbUm, 0.5, 1e-9);
+}
+
+// A volume voxelized by fluorosim names its neurons: the viewer draws those, placed as they were
+// voxelized, and not a stray SWC file in the same folder; its notes say what it drew.
+TEST(ViewerData, TheVolumesOwnNeuronsAreDrawnWithTheirPlacement) {
+    TempDir dir;
+    ViewerScene s(dir);
+    std::ofstream(dir.path() / "cell.swc") << "1 1 0 0 0 3 -1\n2 3 6 0 0 1 1\n";
+    std::ofstream(dir.path() / "stray.swc") << "1 1 5 5 5 2 -1\n";
+    optics::VoxelizeArgs a;
+    a.swc = {(dir.path() / "cell.swc").string(), (dir.path() / "cell.swc").string()};
+    a.voxel = "1um";
+    a.dyes = {"AF488", "AF594"};
+    a.concentrations = {"10uM"};
+    a.grids = {"green", "magenta"};
+    a.offsets = {"12um,20um,12um", "28um,20um,12um"};
+    a.rotations = {"z:0", "z:90"};
+    a.output = (dir.path() / "neurons.vdb").string();
+    optics::voxelizeFiles(a, database(), nullptr);
+    s.scene()["media"]["tissue"]["volume"]["file"] = "neurons.vdb";
+    s.write();
+    const Loaded l = load(s, {{}, true});
+    ASSERT_EQ(l.specimen.neurons.size(), 2u);
+    const viewer::NeuronModel& second = l.specimen.neurons[1];
+    EXPECT_NEAR(second.pieces.front().aUm.x, 28, 1e-6);  // the soma where it was placed
+    EXPECT_NEAR(second.pieces.back().bUm.y, 26, 1e-6);   // the dendrite turned from +x to +y
+    EXPECT_EQ(second.channel, 1);
+    bool named = false;
+    for (const std::string& n : l.specimen.notes) named = named || (n.find("cell.swc (label 2)") != std::string::npos);
+    EXPECT_TRUE(named);
 }
 
 TEST(ViewerData, SpectralImageLayersAndBands) {
