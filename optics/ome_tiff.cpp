@@ -278,7 +278,8 @@ std::string omeXml(int width, int height, int planes, int channels, const std::s
         const ChannelInfo& ch = meta.channels.at(static_cast<size_t>(c));
         x += "      <Channel" + attr("ID", "Channel:0:" + std::to_string(c)) + attr("Name", ch.name) + attr("SamplesPerPixel", 1LL) +
              attr("ExcitationWavelength", ch.excitationNm) + attr("ExcitationWavelengthUnit", std::string("nm")) +
-             attr("EmissionWavelength", ch.emissionNm) + attr("EmissionWavelengthUnit", std::string("nm"));
+             // The emission path's centroid to 0.1 nm, as a filter's centre is quoted (not 525.4445925268271).
+             measured("EmissionWavelength", std::round(ch.emissionNm * 10) / 10) + attr("EmissionWavelengthUnit", std::string("nm"));
         if (cam)
             x += ">\n        <DetectorSettings" + attr("ID", std::string("Detector:0")) + attr("Gain", cam->gainElectronsPerAdu) +
                  attr("Offset", cam->offsetAdu) + "/>\n      </Channel>\n";

@@ -4,6 +4,8 @@
 // unwritable output.
 #include <gtest/gtest.h>
 
+#include <regex>
+
 #include <signal.h>
 
 #include <nlohmann/json.hpp>
@@ -63,6 +65,8 @@ TEST(AcquireCli, WritesOmeTiffStacks) {
     // 6.5 um / 16 as it was meant, not 0.40625000000000006.
     EXPECT_TRUE(contains(stack.imageDescription, "PhysicalSizeX=\"0.40625\"")) << stack.imageDescription.substr(0, 600);
     EXPECT_TRUE(contains(stack.imageDescription, "ExcitationWavelength=\"488\"")) << stack.imageDescription.substr(0, 600);
+    // The emission path's centre to 0.1 nm, not 525.4445925268271.
+    EXPECT_TRUE(std::regex_search(stack.imageDescription, std::regex("EmissionWavelength=\"[0-9]+(\\.[0-9])?\""))) << stack.imageDescription.substr(0, 900);
     const optics::TiffStackInfo expected = optics::readTiffStack(dir.path() / "stack.expected.ome.tif", false);
     EXPECT_EQ(expected.pages, 3);
     EXPECT_EQ(expected.sampleFormat, 3);
