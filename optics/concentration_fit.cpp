@@ -154,13 +154,25 @@ void setParametrisation(FitOptions& o, const std::string& text, const std::strin
         return;
     }
     if (text.rfind("grid:", 0) == 0) {
-        const double cell = parseQuantity(text.substr(5), Dimension::Length, option);
-        if (!(cell > 0)) throw ConfigError(option + ": the grid cell must be positive, got \"" + excerpt(text) + "\"");
+        // "grid:16um>8um>4um": coarse to fine, the last cell the fit's.
+        std::vector<double> cells;
+        size_t begin = 5;
+        while (true) {
+            const size_t end = text.find('>', begin);
+            const double cell = parseQuantity(text.substr(begin, end == std::string::npos ? std::string::npos : end - begin), Dimension::Length, option);
+            if (!(cell > 0)) throw ConfigError(option + ": the grid cell must be positive, got \"" + excerpt(text) + "\"");
+            if (!cells.empty() && !(cell * 1e3 < cells.back()))
+                throw ConfigError(option + ": coarse to fine, each cell smaller than the one before, got \"" + excerpt(text) + "\"");
+            cells.push_back(cell * 1e3);
+            if (end == std::string::npos) break;
+            begin = end + 1;
+        }
         o.parametrisation = FitParametrisation::Grid;
-        o.gridCellUm = cell * 1e3;
+        o.gridCellUm = cells.back();
+        o.coarserCellsUm.assign(cells.begin(), cells.end() - 1);
         return;
     }
-    throw ConfigError(option + ": expected \"labels\" or \"grid:CELL\" (e.g. grid:8um), got \"" + excerpt(text) + "\"");
+    throw ConfigError(option + ": expected \"labels\", \"grid:CELL\" (e.g. grid:8um) or \"grid:16um>8um\" (coarse to fine), got \"" + excerpt(text) + "\"");
 }
 
 void setScatteredModel(FitOptions& o, const std::string& text, const std::string& option) {
@@ -194,6 +206,16 @@ void FitOptions::validate() const {
     if (start)
         for (double v : *start)
             if (!(v >= 0) || !std::isfinite(v)) throw ConfigError("fit: starting values must be finite and >= 0, got " + std::to_string(v));
+    if (!coarserCellsUm.empty() && parametrisation != FitParametrisation::Grid) throw ConfigError("fit: coarse-to-fine cells need a grid");
+    for (size_t i = 0; i < coarserCellsUm.size(); ++i) {
+        const double next = i + 1 < coarserCellsUm.size() ? coarserCellsUm[i + 1] : gridCellUm;
+        if (!(coarserCellsUm[i] > next) || !std::isfinite(coarserCellsUm[i]) || coarserCellsUm[i] > 1e4)
+            throw ConfigError("fit: coarse-to-fine cells must shrink to the grid's " + std::to_string(gridCellUm) + " um, got " + std::to_string(coarserCellsUm[i]) +
+                              " um before " + std::to_string(next) + " um");
+    }
+    if (coarser && (parametrisation != FitParametrisation::Grid || !coarser->map || !coarser->map->isGrid()))
+        throw ConfigError("fit: a coarser start needs a grid fit on a grid");
+    if (coarser && start) throw ConfigError("fit: give a start or a coarser fit, not both");
     acquisition.validate();
 }
 
@@ -803,6 +825,36 @@ double checkFitDerivatives(const LinearPoissonFit& fit, const std::vector<double
 FitResult fitConcentrations(Scene& scene, const Microscope& m, const FitData& data, const FitOptions& o) {
     const auto start = std::chrono::steady_clock::now();
     o.validate();
+    if (!o.coarserCellsUm.empty()) {
+        // Coarse to fine: each level's field starts the next; the last level is the fit.
+        FitOptions level = o;
+        level.coarserCellsUm.clear();
+        std::vector<std::string> lines;
+        int iterations = 0, projections = 0;
+        double forward = 0;
+        for (double cell : o.coarserCellsUm) {
+            level.gridCellUm = cell;
+            auto coarse = std::make_shared<FitResult>(fitConcentrations(scene, m, data, level));
+            const std::string line = format("level %g um: ", cell) + std::to_string(coarse->parameters.size()) + " nodes, " +
+                                     std::to_string(coarse->iterations) + " iterations, deviance " + format("%.10g", coarse->deviance);
+            lines.insert(lines.end(), coarse->logLines.begin(), coarse->logLines.end());
+            lines.push_back(line);
+            if (o.log) o.log(line);
+            iterations += coarse->iterations;
+            projections += coarse->projections;
+            forward += coarse->forwardEquivalents;
+            level.start.reset();
+            level.coarser = std::move(coarse);
+        }
+        level.gridCellUm = o.gridCellUm;
+        FitResult r = fitConcentrations(scene, m, data, level);
+        r.logLines.insert(r.logLines.begin(), lines.begin(), lines.end());
+        r.coarserIterations = iterations;
+        r.projections += projections;
+        r.forwardEquivalents += forward;
+        r.seconds = secondsSince(start);
+        return r;
+    }
     if (data.channels.empty()) throw ConfigError("fit: no channel to fit");
     FitResult result;
     StackOperator op(scene, m, data.channels, o.acquisition);
@@ -819,6 +871,14 @@ FitResult fitConcentrations(Scene& scene, const Microscope& m, const FitData& da
     const CameraNoise& noise = data.noise;
     const MediaGuard guard{scene, scene.media};
     const LatticeGeometry& frame = op.model(0).geometry();
+    if (o.coarser) {  // every node at the coarser fit's field there (the same stack frame)
+        std::vector<double> coarseTheta;
+        for (const FittedParameter& p : o.coarser->parameters) coarseTheta.push_back(p.theta);
+        for (size_t j = 0; j < map->size(); ++j) {
+            const std::array<double, 3> x = map->nodePosition(j);
+            theta[j] = std::max(0.0, o.coarser->map->gridFactor(x[0], x[1], x[2], coarseTheta));
+        }
+    }
     std::vector<double> scattered(op.stackPixels(), 0.0);
     std::vector<double> previous;
     // Per label: the template's scattered light, once; each label's share joins its column.

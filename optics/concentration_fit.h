@@ -35,9 +35,16 @@ enum class FitLikelihood { Deviance, Pearson };
 // iterations apart, docs/inverse.md).
 enum class ScatteredModel { None, Reestimated, PerLabel };
 
+struct FitResult;
+
 struct FitOptions {
     FitParametrisation parametrisation = FitParametrisation::Labels;
     double gridCellUm = 8;            // the coarse grid's cell
+    // Grid, coarse to fine: fit on these cells first (coarsest first, each larger than the next and than
+    // gridCellUm), each fit's field starting the next (refinement: trilinear values at the finer nodes).
+    std::vector<double> coarserCellsUm;
+    // Grid: start every node at this coarser fit's field (set by the refinement, or by a caller).
+    std::shared_ptr<const FitResult> coarser;
     bool fitUnlabelled = false;       // dye outside every label (and homogeneous dyed media) as parameters too
     std::vector<int> labels;          // per label: fit only these label values (empty: every label); the rest stay fixed
     std::vector<std::string> channels;  // the microscope's channels to fit (empty: every channel of the stack)
@@ -63,7 +70,7 @@ const char* fitParametrisationName(FitParametrisation p);
 const char* scatteredModelName(ScatteredModel s);
 const char* fitLikelihoodName(FitLikelihood l);
 // What a user types, into the options; ConfigError naming `option` and the text.
-//  "labels" or "grid:8um" (a length with its unit);  "auto" (labels per label, reestimated with a grid), "none",
+//  "labels", "grid:8um" (a length with its unit) or "grid:16um>8um>4um" (coarse to fine);  "auto" (labels per label, reestimated with a grid), "none",
 //  "reestimated" or "labels" (set the parametrisation first);  "deviance" or "pearson".
 void setParametrisation(FitOptions& o, const std::string& text, const std::string& option);
 void setScatteredModel(FitOptions& o, const std::string& text, const std::string& option);
@@ -103,6 +110,7 @@ struct FitResult {
     size_t saturatedPixels = 0;  // left out
     int iterations = 0;          // trust-region iterations, all outer iterations
     int outerIterations = 0;
+    int coarserIterations = 0;   // coarse to fine: the coarser levels' trust-region iterations (not in `iterations`)
     int projections = 0;         // plane images projected (a forward image is planes × channels of them)
     double forwardEquivalents = 0;
     double seconds = 0;

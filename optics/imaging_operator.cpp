@@ -125,6 +125,11 @@ double ParameterMap::gridFactor(double x, double y, double z, const std::vector<
     return w > 0 ? f + (1 - w) * (f / w) : 1.0;
 }
 
+std::array<double, 3> ParameterMap::nodePosition(size_t parameter) const {
+    const std::array<int, 3>& c = parameters_.at(parameter).cell;
+    return {origin_[0] + c[0] * cellMm_, origin_[1] + c[1] * cellMm_, origin_[2] + c[2] * cellMm_};
+}
+
 void ParameterMap::entries(const EmissionLattice& lattice, size_t p, std::vector<Entry>& out) const {
     out.clear();
     if (!grid_) {

@@ -55,6 +55,8 @@ public:
     void basis(double x, double y, double z, std::vector<std::pair<int, double>>& out) const;
     // Σ_j θ_j B_j at a stack-frame position (1 where no node around is a parameter).
     double gridFactor(double x, double y, double z, const std::vector<double>& theta) const;
+    // Grid: where parameter j's node lies, in the stack frame the lattices use (mm).
+    std::array<double, 3> nodePosition(size_t parameter) const;
 
 private:
     bool grid_ = false;

@@ -241,7 +241,7 @@ void addFitCommands(CLI::App& app) {
     fit->add_option("-o,--output", a->output, "Output folder: fit.json, fit.log, solver_report.txt, concentrations.vdb, model/residual stacks")->required();
     fit->add_option("--planes", a->planes, "Planes of the stack, as given to acquire (default: the scene's)");
     fit->add_option("--step", a->step, "Plane step, as given to acquire, e.g. 1um (default: the scene's)");
-    fit->add_option("--params", a->params, "labels (one scale per label) or grid:CELL (e.g. grid:8um)");
+    fit->add_option("--params", a->params, "labels (one scale per label), grid:CELL (e.g. grid:8um), or coarse to fine, e.g. grid:16um>8um>4um");
     fit->add_option("--channels", a->channels, "Channels to fit (default: every channel of the stack)")->delimiter(',');
     fit->add_option("--scattered", a->scattered, "Scattered light in the model: labels (one render tallied per label; the default per label), reestimated (a render per outer iteration, held fixed; the default with a grid), none");
     fit->add_option("--scattered-spp", a->scatteredSpp, "Paths per pixel of the scattered light's render");
