@@ -26,6 +26,9 @@ struct FitSceneOptions {
     int spp = 4;
     // A factor on every rod's concentration along x (µm), e.g. a gradient; 1 by default.
     std::function<double(double)> profile;
+    // Instead of the rods: this many AF488 beads (radius 0.6 µm) on a square grid 2 µm apart in the focal
+    // plane, bead l (1-based) labelled l at (5 + l mod 7) µM: a per-label fit of many labels.
+    int beads = 0;
 };
 
 inline std::string fitSceneJson(const FitSceneOptions& o) {
@@ -84,6 +87,17 @@ inline void writeBoxObj(const std::filesystem::path& file, double half, double h
 // edge of one voxel, cut at the rod's ends.
 inline std::pair<double, int> fitRodVoxel(const FitSceneOptions& o, int i, int j, int k, bool af594) {
     const double h = 0.5, x = i * h, y = j * h, z = k * h, r = 0.7;
+    if (o.beads > 0) {
+        if (af594) return {0, 0};
+        const int side = static_cast<int>(std::ceil(std::sqrt(double(o.beads))));
+        const double spacing = 2, first = -0.5 * (side - 1) * spacing;
+        const int bx = static_cast<int>(std::lround((x - first) / spacing)), by = static_cast<int>(std::lround((y - first) / spacing));
+        const int label = by * side + bx + 1;
+        if (bx < 0 || by < 0 || bx >= side || by >= side || label > o.beads) return {0, 0};
+        const double d = std::sqrt(sqr(x - first - bx * spacing) + sqr(y - first - by * spacing) + z * z);
+        const double c = std::clamp((0.6 + 0.25 - d) / 0.5, 0.0, 1.0);
+        return c > 0 ? std::pair<double, int>{(5 + label % 7) * c, label} : std::pair<double, int>{0, 0};
+    }
     auto coverage = [&](double d) { return std::clamp((r + 0.25 - d) / 0.5, 0.0, 1.0); };
     if (!af594) {
         const double d1 = std::hypot(y + 3, z - 0.2), d3 = std::hypot(y - 5, z - 0.4);
