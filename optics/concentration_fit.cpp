@@ -568,6 +568,14 @@ struct LinearPoissonFit::Impl {
     }
 };
 
+void LinearPoissonFit::setBackground(const std::vector<double>& background) {
+    Impl& m = *impl_;
+    for (size_t q = 0; q < m.pixel.size(); ++q) {
+        if (m.pixel[q] >= background.size()) throw ConfigError("linear fit: the background is smaller than the stack");
+        m.background[q] = background[m.pixel[q]];
+    }
+}
+
 LinearPoissonFit::LinearPoissonFit(const SparseColumns& columns, std::vector<double> background, const CameraNoise& noise, const ParameterMap& map,
                                    const FitOptions& options)
     : impl_(std::make_unique<Impl>()) {
@@ -915,12 +923,26 @@ FitResult fitConcentrations(Scene& scene, const Microscope& m, const FitData& da
         if (o.scattered == ScatteredModel::Reestimated) scattered = scatteredLight(scene, m, data.channels, o, op.stackPixels());
         const SparseColumns cols = withScatter(op.columns(*map, o.cancel));
         const std::vector<double> fixed = op.apply(*map, std::vector<double>(map->size(), 0.0), true);
-        std::vector<double> background(op.stackPixels());
-        for (size_t i = 0; i < background.size(); ++i) background[i] = noise.darkElectrons + fixed[i] + scattered[i];
-        linear = std::make_unique<LinearPoissonFit>(cols, std::move(background), noise, *map, o);
-        solution = linear->solve(data.values, data.adu, theta, alpha, false, outer, &result.logLines);
-        theta = solution.theta;
-        result.iterations += solution.iterations;
+        // The PSF's tail beyond its cut (0.4 % of the light, reaching every pixel) is not in the columns, so
+        // that they stay sparse: it is frozen at an estimate and refreshed at the solution until the solution
+        // no longer moves it (each refresh shrinks the change about 250 times).
+        auto background = [&](const std::vector<double>& at) {
+            const std::vector<double> tail = op.tail(*map, at, false);
+            std::vector<double> b(op.stackPixels());
+            for (size_t i = 0; i < b.size(); ++i) b[i] = noise.darkElectrons + fixed[i] + tail[i] + scattered[i];
+            return b;
+        };
+        linear = std::make_unique<LinearPoissonFit>(cols, background(theta), noise, *map, o);
+        for (int refresh = 0;; ++refresh) {
+            solution = linear->solve(data.values, data.adu, theta, alpha, false, outer, &result.logLines);
+            result.iterations += solution.iterations;
+            bool still = true;
+            for (size_t j = 0; j < theta.size() && still; ++j)
+                still = std::abs(solution.theta[j] - theta[j]) <= o.outerTolerance * std::max(std::abs(solution.theta[j]), 1e-3);
+            theta = solution.theta;
+            if (still || refresh == 8) break;
+            linear->setBackground(background(theta));
+        }
         result.solverReport += "outer iteration " + std::to_string(outer) + "\n" + solution.report + "\n";
         result.outerIterations = outer;
         if (!solution.converged) result.warnings.push_back("outer iteration " + std::to_string(outer) + ": the solver stopped without converging (see the report)");
@@ -994,7 +1016,7 @@ Gradient fitGradient(const Scene& scene, const Microscope& m, const FitOptions& 
     ParameterMap map = makeMap(scene, op, o);
     if (map.size() == 0) throw ConfigError("gradient: no parameter (no label holds dye the chosen channels see)");
     if (!op.refreshGains(scene, o.cancel)) throw Cancelled("gradient cancelled");
-    const SparseColumns cols = op.columns(map, o.cancel);
+    const SparseColumns cols = op.columns(map, o.cancel, true);  // whole columns: they are written dense anyway
     g.parameters = map.parameters();
     for (size_t j = 0; j < map.size(); ++j) {
         std::vector<float> c(op.stackPixels(), 0.0f);

@@ -156,6 +156,8 @@ public:
     Solution solve(const std::vector<double>& observation, bool adu, std::vector<double> start, double priorWeight, bool uncertainties = true,
                    int outer = 1, std::vector<std::string>* log = nullptr) const;
     size_t parameters() const;
+    // A new background over the stack's pixels (the same columns): a frozen part refreshed at a new estimate.
+    void setBackground(const std::vector<double>& background);
 
     struct Impl;
 

@@ -257,7 +257,7 @@ PlaneTerms planeTerms(const UnscatteredModel& model, const EmissionLattice& latt
 
 }  // namespace
 
-SparseColumns StackOperator::columns(const ParameterMap& map, const std::atomic<bool>* cancel) const {
+SparseColumns StackOperator::columns(const ParameterMap& map, const std::atomic<bool>* cancel, bool withTail) const {
     SparseColumns out;
     out.pixels.resize(map.size());
     out.values.resize(map.size());
@@ -287,7 +287,9 @@ SparseColumns StackOperator::columns(const ParameterMap& map, const std::atomic<
                         ems.push_back(em);
                     }
                 if (ems.empty()) continue;
-                const std::vector<std::vector<double>> images = ch.imaging.unscattered->projector(offsets_[static_cast<size_t>(k)]).project(ems, static_cast<int>(b1 - b0), threads_, cancel);
+                const std::vector<std::vector<double>> images = ch.imaging.unscattered->projector(offsets_[static_cast<size_t>(k)])
+                                                                    .project(ems, static_cast<int>(b1 - b0), threads_, cancel,
+                                                                             withTail ? ProjectorParts::All : ProjectorParts::WithoutTail);
                 if (images.empty()) throw Cancelled("cancelled while computing the fit's columns");
                 for (size_t j = b0; j < b1; ++j) {
                     const std::vector<double>& img = images[j - b0];
@@ -310,6 +312,14 @@ SparseColumns StackOperator::columns(const ParameterMap& map, const std::atomic<
 }
 
 std::vector<double> StackOperator::apply(const ParameterMap& map, const std::vector<double>& theta, bool withFixed) const {
+    return applyParts(map, theta, withFixed, ProjectorParts::All);
+}
+
+std::vector<double> StackOperator::tail(const ParameterMap& map, const std::vector<double>& theta, bool withFixed) const {
+    return applyParts(map, theta, withFixed, ProjectorParts::TailOnly);
+}
+
+std::vector<double> StackOperator::applyParts(const ParameterMap& map, const std::vector<double>& theta, bool withFixed, ProjectorParts parts) const {
     if (theta.size() != map.size()) throw ConfigError("stack operator: " + std::to_string(theta.size()) + " values for " + std::to_string(map.size()) + " parameters");
     std::vector<double> y(stackPixels(), 0.0);
     const size_t planePixels = static_cast<size_t>(width_) * height_;
@@ -330,7 +340,8 @@ std::vector<double> StackOperator::apply(const ParameterMap& map, const std::vec
                 }
                 terms.emissions[i].e *= c;
             }
-            const std::vector<std::vector<double>> images = ch.imaging.unscattered->projector(offsets_[static_cast<size_t>(k)]).project(terms.emissions, 1, threads_);
+            const std::vector<std::vector<double>> images =
+                ch.imaging.unscattered->projector(offsets_[static_cast<size_t>(k)]).project(terms.emissions, 1, threads_, nullptr, parts);
             std::copy(images[0].begin(), images[0].end(), y.begin() + static_cast<std::ptrdiff_t>(planeImage(slot, k) * planePixels));
             projectionSeconds_ += secondsSince(start);
             ++projections_;

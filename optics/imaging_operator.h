@@ -97,9 +97,13 @@ public:
     // products freeze. Returns false when cancelled.
     bool refreshGains(const Scene& scene, const std::atomic<bool>* cancel = nullptr);
 
-    SparseColumns columns(const ParameterMap& map, const std::atomic<bool>* cancel = nullptr) const;
+    // A's columns. Without `withTail` they leave out the PSF's tail beyond its cut: the tail reaches every
+    // pixel, so with it every column is dense over its channel (a fit freezes the tail instead: tail()).
+    SparseColumns columns(const ParameterMap& map, const std::atomic<bool>* cancel = nullptr, bool withTail = false) const;
     // y = A θ + (the fixed parts' image), over the stack's pixels.
     std::vector<double> apply(const ParameterMap& map, const std::vector<double>& theta, bool withFixed = true) const;
+    // The part of apply() that the tail-less columns leave out: the PSF's tail of A θ (and of the fixed parts).
+    std::vector<double> tail(const ParameterMap& map, const std::vector<double>& theta, bool withFixed = true) const;
     // Aᵀ y (the fixed parts do not enter).
     std::vector<double> applyAdjoint(const ParameterMap& map, const std::vector<double>& y) const;
 
@@ -109,6 +113,7 @@ public:
     int projections() const { return projections_; }  // plane images projected so far (a forward image is planes × channels)
 
 private:
+    std::vector<double> applyParts(const ParameterMap& map, const std::vector<double>& theta, bool withFixed, ProjectorParts parts) const;
     struct Channel;
     std::vector<std::unique_ptr<Channel>> channels_;
     const Scene& scene_;

@@ -302,8 +302,9 @@ int PsfProjector::reachPixels() const { return impl_->reach; }
 double PsfProjector::kernelSeconds() const { return 1e-9 * static_cast<double>(impl_->kernelNanoseconds.load()); }
 
 std::vector<std::vector<double>> PsfProjector::project(const std::vector<PointEmission>& emissions, int targets, int threads,
-                                                       const std::atomic<bool>* cancel) const {
+                                                       const std::atomic<bool>* cancel, ProjectorParts parts) const {
     const Impl& m = *impl_;
+    const bool nearAndFar = parts != ProjectorParts::TailOnly, withTail = parts != ProjectorParts::WithoutTail && m.tail;
     const int F = m.o.kernelPhases, W = m.regionWidth(), H = m.regionHeight();
     const int width = m.g.width, height = m.g.height, margin = m.g.marginPixels;
     std::vector<std::vector<double>> out(static_cast<size_t>(std::max(0, targets)), std::vector<double>(static_cast<size_t>(width) * height, 0.0));
@@ -322,13 +323,13 @@ std::vector<std::vector<double>> PsfProjector::project(const std::vector<PointEm
         const size_t farCount = static_cast<size_t>(m.far->kernelCount());
         std::vector<std::vector<std::vector<double>>> farBins(static_cast<size_t>(t1 - t0), std::vector<std::vector<double>>(farCount));
         for (const PointEmission& em : emissions) {
-            if (static_cast<int>(em.target) < t0 || static_cast<int>(em.target) >= t1 || !(em.e != 0)) continue;
+            if (!nearAndFar || static_cast<int>(em.target) < t0 || static_cast<int>(em.target) >= t1 || !(em.e != 0)) continue;
             m.forEachPiece(em, [&](int layer, int64_t, int64_t, double) {
                 std::vector<double>& bin = farBins[static_cast<size_t>(static_cast<int>(em.target) - t0)][m.farIndex(em.dye, layer)];
                 if (bin.empty()) bin.assign(static_cast<size_t>(W) * H, 0.0);
             });
         }
-        parallelFor(static_cast<size_t>(bands), threads, [&](size_t band) {
+        if (nearAndFar) parallelFor(static_cast<size_t>(bands), threads, [&](size_t band) {
             if (cancel && cancel->load()) return;
             const int y0 = static_cast<int>(band) * kBandRows, y1 = std::min(H, y0 + kBandRows);
             const auto first = std::lower_bound(order.begin(), order.end(), int64_t(y0) - m.reach - 1, [&](uint32_t a, int64_t r) { return row[a] < r; });
@@ -367,7 +368,7 @@ std::vector<std::vector<double>> PsfProjector::project(const std::vector<PointEm
         if (cancel && cancel->load()) return {};
         // The tail's block deposits (serial: a block spans several bands).
         std::vector<std::vector<std::vector<double>>> tailBins(static_cast<size_t>(t1 - t0));
-        if (m.tail) {
+        if (withTail) {
             const size_t blocks = static_cast<size_t>(m.tailWidth) * m.tailHeight;
             for (auto& bins : tailBins) bins.resize(farCount);
             for (const PointEmission& em : emissions) {
@@ -385,12 +386,14 @@ std::vector<std::vector<double>> PsfProjector::project(const std::vector<PointEm
             }
         }
         parallelFor(static_cast<size_t>(t1 - t0), threads, [&](size_t ti) {
-            const std::vector<double> farImage = m.far->convolveSum(farBins[ti]);
             std::vector<double>& image = out[static_cast<size_t>(t0) + ti];
-            for (int y = 0; y < height; ++y)
-                for (int x = 0; x < width; ++x)
-                    image[static_cast<size_t>(y) * width + x] += farImage[static_cast<size_t>(y + margin) * W + static_cast<size_t>(x + margin)];
-            if (!m.tail) return;
+            if (nearAndFar) {
+                const std::vector<double> farImage = m.far->convolveSum(farBins[ti]);
+                for (int y = 0; y < height; ++y)
+                    for (int x = 0; x < width; ++x)
+                        image[static_cast<size_t>(y) * width + x] += farImage[static_cast<size_t>(y + margin) * W + static_cast<size_t>(x + margin)];
+            }
+            if (!withTail) return;
             // Each block holds the tail's photoelectrons over its B² pixels: interpolated bilinearly per pixel.
             const std::vector<double> tailImage = m.tail->convolveSum(tailBins[ti]);
             const double perPixel = 1.0 / sqr(static_cast<double>(m.o.tailBlockPixels));

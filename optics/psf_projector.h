@@ -50,6 +50,10 @@ struct ProjectorGeometry {
     double tanThetaMax = 0;                       // the collection cone in the sample
 };
 
+// What project() adds up: everything, all but the PSF's tail beyond its cut (sparse images: a fit's
+// columns), or the tail alone.
+enum class ProjectorParts { All, WithoutTail, TailOnly };
+
 class PsfProjector {
 public:
     PsfProjector(const ChannelDyes& dyes, std::shared_ptr<const WidefieldPsf> psf, const ProjectorGeometry& geometry, int pixelNodes,
@@ -60,7 +64,7 @@ public:
     // top. Each pixel sums its emissions in one fixed order, whatever the thread count. `emissions` need
     // not be sorted. Empty result when cancelled.
     std::vector<std::vector<double>> project(const std::vector<PointEmission>& emissions, int targets, int threads,
-                                             const std::atomic<bool>* cancel = nullptr) const;
+                                             const std::atomic<bool>* cancel = nullptr, ProjectorParts parts = ProjectorParts::All) const;
     // The adjoint: for each emission, Σ_pixels image(pixel) × the photoelectrons a unit emission (e = 1)
     // sends there. `image` is a camera image.
     std::vector<double> backProject(const std::vector<double>& image, const std::vector<PointEmission>& emissions, int threads) const;

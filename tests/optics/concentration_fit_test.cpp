@@ -70,6 +70,14 @@ struct FitSetup {
         scene.media = original;
         return op->columns(*map);
     }
+    // The stack the whole operator gives (with the PSF's tail, which the columns leave out), dark included:
+    // data for fitConcentrations, which freezes the tail.
+    std::vector<double> full(const std::vector<double>& theta) const {
+        std::vector<double> mu = op->apply(*map, theta, true);
+        for (double& v : mu) v += noise.darkElectrons;
+        return mu;
+    }
+    // From the columns alone: data for LinearPoissonFit, whose model is the columns.
     std::vector<double> expected(const optics::SparseColumns& cols, const std::vector<double>& theta, double scale = 1) const {
         std::vector<double> mu(op->stackPixels(), noise.darkElectrons);
         for (size_t j = 0; j < theta.size(); ++j)
@@ -150,7 +158,7 @@ TEST(ConcentrationFit, RecoversNoiseFreeDataWithTheAttenuationUpdated) {
     FitSetup truth(testing::FitSceneOptions{{4, 12, 7}});
     const std::vector<double> data = [&] {
         EXPECT_TRUE(truth.op->refreshGains(truth.scene));
-        return truth.expected(truth.op->columns(*truth.map), {1, 1, 1});
+        return truth.full({1, 1, 1});
     }();
     FitSetup s;
     optics::FitData d;
@@ -499,7 +507,7 @@ std::vector<double> gradientSpecimenElectrons() {
     truthOptions.profile = gradientProfile;
     FitSetup truth(truthOptions);
     EXPECT_TRUE(truth.op->refreshGains(truth.scene));
-    return truth.expected(truth.op->columns(*truth.map), {1, 1, 1});
+    return truth.full({1, 1, 1});
 }
 
 // A coarse grid inside the label masks recovers a gradient of concentration: the truth is every rod
