@@ -510,20 +510,24 @@ std::vector<double> gradientSpecimenElectrons() {
     return truth.full({1, 1, 1});
 }
 
+// One noisy read-out of the gradient specimen (camera seed `seed`), ready to fit with the template `s`.
+optics::FitData gradientFitData(const FitSetup& s, uint64_t seed) {
+    const std::vector<uint16_t> adu = optics::Detector(s.microscope.detector).readOut(gradientSpecimenElectrons(), seed, 0);
+    optics::FitData d;
+    d.channels = {0, 1};
+    d.values.assign(adu.begin(), adu.end());
+    d.noise = s.noise;
+    return d;
+}
+
 // A coarse grid inside the label masks recovers a gradient of concentration: the truth is every rod
 // at its template's concentration times 1 + 0.1 (x + 10 µm), from 1 at x = −10 µm to 3 at x = 10 µm
 // (which trilinear nodes represent exactly), fitted on a grid of 4 µm cells with the prior's weight from
 // the discrepancy rule.
 TEST(ConcentrationFit, CoarseGridRecoversAConcentrationGradient) {
     const auto profile = gradientProfile;
-    const std::vector<double> mu = gradientSpecimenElectrons();
     FitSetup s(gradientTemplateOptions());
-    const optics::Detector camera(s.microscope.detector);
-    const std::vector<uint16_t> adu = camera.readOut(mu, 5, 0);
-    optics::FitData d;
-    d.channels = {0, 1};
-    d.values.assign(adu.begin(), adu.end());
-    d.noise = s.noise;
+    const optics::FitData d = gradientFitData(s, 5);
     optics::FitOptions o;
     o.parametrisation = optics::FitParametrisation::Grid;
     o.scattered = optics::ScatteredModel::None;  // the data are the computed image alone
@@ -575,14 +579,8 @@ TEST(ConcentrationFit, CoarseGridRecoversAConcentrationGradient) {
 // deviance, about 0.005 over these pixels) leaves moves of a tenth of a standard error along flat
 // directions.
 TEST(ConcentrationFit, CoarseToFineReachesTheDirectFitFromACloserStart) {
-    const std::vector<double> mu = gradientSpecimenElectrons();
     FitSetup s(gradientTemplateOptions());
-    const optics::Detector camera(s.microscope.detector);
-    const std::vector<uint16_t> adu = camera.readOut(mu, 5, 0);
-    optics::FitData d;
-    d.channels = {0, 1};
-    d.values.assign(adu.begin(), adu.end());
-    d.noise = s.noise;
+    const optics::FitData d = gradientFitData(s, 5);
     optics::FitOptions o;
     optics::setParametrisation(o, "grid:4um", "--params");
     o.scattered = optics::ScatteredModel::None;
