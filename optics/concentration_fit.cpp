@@ -924,8 +924,8 @@ FitResult fitConcentrations(Scene& scene, const Microscope& m, const FitData& da
         const SparseColumns cols = withScatter(op.columns(*map, o.cancel));
         const std::vector<double> fixed = op.apply(*map, std::vector<double>(map->size(), 0.0), true);
         // The PSF's tail beyond its cut (0.4 % of the light, reaching every pixel) is not in the columns, so
-        // that they stay sparse: it is frozen at an estimate and refreshed at the solution until the solution
-        // no longer moves it (each refresh shrinks the change about 250 times).
+        // that they stay sparse: it is frozen at the estimate, and refreshed once at the solution when that
+        // moved (a refresh shrinks the tail's error about 250 times: after one, 1.6e-5 of the step).
         auto background = [&](const std::vector<double>& at) {
             const std::vector<double> tail = op.tail(*map, at, false);
             std::vector<double> b(op.stackPixels());
@@ -940,7 +940,7 @@ FitResult fitConcentrations(Scene& scene, const Microscope& m, const FitData& da
             for (size_t j = 0; j < theta.size() && still; ++j)
                 still = std::abs(solution.theta[j] - theta[j]) <= o.outerTolerance * std::max(std::abs(solution.theta[j]), 1e-3);
             theta = solution.theta;
-            if (still || refresh == 8) break;
+            if (still || refresh == 1) break;
             linear->setBackground(background(theta));
         }
         result.solverReport += "outer iteration " + std::to_string(outer) + "\n" + solution.report + "\n";
