@@ -104,6 +104,14 @@ struct PsfProjector::Impl {
         f(std::clamp(i, 0, blocks - 1), 1 - t);
         f(std::clamp(i + 1, 0, blocks - 1), t);
     }
+    // The same in 2-D at (x, y): f(block index, weight) four times, rows outer.
+    template <class F>
+    void forEachBlock(double x, double y, F&& f) const {
+        blockWeights(y, tailHeight, [&](int j, double wy) {
+            blockWeights(x, tailWidth, [&](int i, double wx) { f(static_cast<size_t>(j) * tailWidth + static_cast<size_t>(i), wx * wy); });
+        });
+    }
+    double binDz(int bin, double binMm) const { return -halfDepthMm + (bin + 0.5) * binMm; }
     size_t farIndex(uint32_t dye, int layer) const { return static_cast<size_t>(dye) * static_cast<size_t>(bins) + static_cast<size_t>(layerBin[static_cast<size_t>(layer)]); }
     int regionHeight() const { return g.height + 2 * g.marginPixels; }
     double layerDz(int l) const { return (l - 0.5 * g.layers + 0.5) * g.axialMm; }
@@ -233,7 +241,7 @@ PsfProjector::PsfProjector(const ChannelDyes& dyes, std::shared_ptr<const Widefi
     const int side = 2 * m.farRadius + 1;
     for (const EmittingDye& t : m.dyes)
         for (int b = 0; b < m.bins; ++b) {
-            const double dz = -m.halfDepthMm + (b + 0.5) * binMm;
+            const double dz = m.binDz(b, binMm);
             const RadialTable radial((m.farRadius + 2) * m.g.pixelMm * std::sqrt(2.0), m.g.pixelMm / 16,
                                      [&](double r) { return m.profile(t.nodeLambda, t.nodeWeight, r, dz) * (1 - m.splitWeight(b, r)); });
             std::vector<float> k(static_cast<size_t>(side) * side);
@@ -259,7 +267,7 @@ PsfProjector::PsfProjector(const ChannelDyes& dyes, std::shared_ptr<const Widefi
             }
         for (const EmittingDye& t : m.dyes)
             for (int b = 0; b < m.bins; ++b) {
-                const double dz = -m.halfDepthMm + (b + 0.5) * binMm;
+                const double dz = m.binDz(b, binMm);
                 std::vector<double> kna(t.nodeLambda.size()), amplitude(t.nodeLambda.size());
                 for (size_t n = 0; n < t.nodeLambda.size(); ++n) {
                     kna[n] = 2 * kPi / (t.nodeLambda[n] * 1e-6) * m.psf->pupil().na;
@@ -377,11 +385,7 @@ std::vector<std::vector<double>> PsfProjector::project(const std::vector<PointEm
                 m.forEachPiece(em, [&](int layer, int64_t qu, int64_t qv, double wc) {
                     std::vector<double>& bin = bins[m.farIndex(em.dye, layer)];
                     if (bin.empty()) bin.assign(blocks, 0.0);
-                    m.blockWeights(double(qv) / F, m.tailHeight, [&](int j, double wy) {
-                        m.blockWeights(double(qu) / F, m.tailWidth, [&](int i, double wx) {
-                            bin[static_cast<size_t>(j) * m.tailWidth + static_cast<size_t>(i)] += em.e * wc * wx * wy;
-                        });
-                    });
+                    m.forEachBlock(double(qu) / F, double(qv) / F, [&](size_t block, double w) { bin[block] += em.e * wc * w; });
                 });
             }
         }
@@ -400,11 +404,7 @@ std::vector<std::vector<double>> PsfProjector::project(const std::vector<PointEm
             for (int y = 0; y < height; ++y)
                 for (int x = 0; x < width; ++x) {
                     double sum = 0;
-                    m.blockWeights(y + margin + 0.5, m.tailHeight, [&](int j, double wy) {
-                        m.blockWeights(x + margin + 0.5, m.tailWidth, [&](int i, double wx) {
-                            sum += wx * wy * tailImage[static_cast<size_t>(j) * m.tailWidth + static_cast<size_t>(i)];
-                        });
-                    });
+                    m.forEachBlock(x + margin + 0.5, y + margin + 0.5, [&](size_t block, double w) { sum += w * tailImage[block]; });
                     image[static_cast<size_t>(y) * width + x] += sum * perPixel;
                 }
         });
@@ -439,11 +439,7 @@ std::vector<double> PsfProjector::backProject(const std::vector<double>& image, 
         for (int y = 0; y < height; ++y)
             for (int x = 0; x < width; ++x) {
                 const double value = image[static_cast<size_t>(y) * width + x] * perPixel;
-                m.blockWeights(y + margin + 0.5, m.tailHeight, [&](int j, double wy) {
-                    m.blockWeights(x + margin + 0.5, m.tailWidth, [&](int i, double wx) {
-                        blocks[static_cast<size_t>(j) * m.tailWidth + static_cast<size_t>(i)] += wx * wy * value;
-                    });
-                });
+                m.forEachBlock(x + margin + 0.5, y + margin + 0.5, [&](size_t block, double w) { blocks[block] += w * value; });
             }
         parallelFor(farCount, threads, [&](size_t b) {
             if (binUsed[b]) tailAdjoint[b] = m.tail->correlate(blocks, static_cast<int>(b));
@@ -478,11 +474,7 @@ std::vector<double> PsfProjector::backProject(const std::vector<double>& image, 
             double tail = 0;
             if (m.tail) {
                 const std::vector<double>& adjTail = tailAdjoint[m.farIndex(em.dye, layer)];
-                m.blockWeights(double(qv) / F, m.tailHeight, [&](int j, double wy) {
-                    m.blockWeights(double(qu) / F, m.tailWidth, [&](int bx, double wx) {
-                        tail += wx * wy * adjTail[static_cast<size_t>(j) * m.tailWidth + static_cast<size_t>(bx)];
-                    });
-                });
+                m.forEachBlock(double(qu) / F, double(qv) / F, [&](size_t block, double w) { tail += w * adjTail[block]; });
             }
             sum += wc * (near + far + tail);
         });
