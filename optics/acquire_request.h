@@ -25,6 +25,7 @@ struct AcquireRequest {
     int threads = 0;
     std::vector<std::string> channels;  // names to acquire (default: all)
     std::optional<std::string> exposure;  // a time ("20 ms"), or "auto" / "auto:F" (autoExpose at F of the full well, 0.5 by default)
+    std::optional<int64_t> fieldPhotons;   // the excitation field's photons per beam line side and plane (0: off)
 };
 
 // --exposure: a time replaces the scene's; "auto[:F]" asks for autoExpose after the stack is acquired.
@@ -70,6 +71,8 @@ inline void checkAcquireRequest(const AcquireRequest& a) {
     if (a.noiseRatio && (!(*a.noiseRatio > 0) || !std::isfinite(*a.noiseRatio)))
         throw ConfigError("--noise-ratio: must be positive and finite, got " + std::to_string(*a.noiseRatio));
     parseExposure(a.exposure);
+    if (a.fieldPhotons && (*a.fieldPhotons < 0 || *a.fieldPhotons == 1 || *a.fieldPhotons > (int64_t(1) << 40)))
+        throw ConfigError("--field-photons: must be 0 (no field) or lie in [2, 2^40], got " + std::to_string(*a.fieldPhotons));
 }
 
 // The stack overrides (planes, step) of acquire and fit, applied to `m` and validated against the scene.
@@ -110,6 +113,7 @@ inline AcquireOptions applyAcquireRequest(const AcquireRequest& a, const Scene& 
     }
     if (o.noiseRatio) o.maxSpp = std::max(o.maxSpp, o.spp);
     o.threads = a.threads;
+    if (a.fieldPhotons) o.field.photons = static_cast<uint64_t>(*a.fieldPhotons);
     return o;
 }
 

@@ -8,6 +8,7 @@
 #include "core/memory_cap.h"
 #include "core/parallel.h"
 #include "core/rng.h"
+#include "render/fluence_field.h"
 #include "render/fluorescence.h"
 #include "render/straight_line.h"
 
@@ -37,6 +38,16 @@ std::optional<Estimator> estimatorFromName(const std::string& name) {
     return std::nullopt;
 }
 
+void ExcitationFieldOptions::validate() const {
+    auto positive = [](double v, const char* what) {
+        if (!(v > 0) || !std::isfinite(v)) throw ConfigError(std::string("excitation field ") + what + " must be positive and finite, got " + std::to_string(v));
+    };
+    positive(lateralUm, "lateral spacing (um)");
+    positive(axialUm, "axial spacing (um)");
+    positive(halfDepthUm, "half depth (um)");
+    if (photons == 1 || photons > (uint64_t(1) << 40)) throw ConfigError("excitation field photons must be 0 or lie in [2, 2^40], got " + std::to_string(photons));
+}
+
 void AcquireOptions::validate() const {
     if (spp < 1) throw ConfigError("spp must be at least 1, got " + std::to_string(spp));
     if (threads < 0) throw ConfigError("threads must be >= 0, got " + std::to_string(threads));
@@ -49,6 +60,7 @@ void AcquireOptions::validate() const {
     if (labels && labelCount < 1) throw ConfigError("a label tally needs at least one label");
     unscattered.validate();
     psf.validate();
+    field.validate();
 }
 
 uint64_t planeStreamKey(const std::string& channelName, int plane) { return mixBits(hashName(channelName) + mixBits(static_cast<uint64_t>(plane) + 1)); }
@@ -195,6 +207,42 @@ std::vector<double> poolImage(const std::vector<double>& image, int width, int h
     return out;
 }
 
+// The plane's excitation field over the computed region (and out to the options' depth), for a channel
+// lit only by beams with lines in a scene where something scatters; null otherwise.
+std::unique_ptr<const BeamExcitationField> traceExcitationField(const Scene& scene, const PathTracer& tracer, const Imaging& imaging,
+                                                               const UnscatteredModel& model, const AcquireOptions& o, uint64_t streamKey) {
+    if (o.field.photons == 0 || tracer.fluorescence().model() != FluorescenceModel::Full) return nullptr;
+    const std::vector<BeamLineSide> lines = beamLineSides(tracer.lights());
+    if (lines.empty()) return nullptr;
+    const bool scatters = std::any_of(scene.media.begin(), scene.media.end(), [](const Medium& m) {
+        return !m.isVacuumLike() && m.channelMax()[kScatteringChannel] > 0 && m.scatteringAt(550) > 0;
+    });
+    if (!scatters) return nullptr;
+    for (const BeamLineSide& l : lines)
+        if (!l.profile->axisPoint()) return nullptr;
+    const LatticeGeometry& g = model.geometry();
+    FieldBox box;
+    box.centre = imaging.centre();
+    box.right = imaging.world(1, 0, 0) - imaging.world(0, 0, 0);
+    box.axis = imaging.axis();
+    box.up = imaging.world(0, 1, 0) - imaging.world(0, 0, 0);
+    box.halfX = 0.5 * g.regionWidth() * g.pixelMm;
+    box.halfY = 0.5 * g.regionHeight() * g.pixelMm;
+    box.halfZ = std::max(g.halfDepthMm(), o.field.halfDepthUm * 1e-3);
+    box.hx = box.hy = o.field.lateralUm * 1e-3;
+    box.hz = o.field.axialUm * 1e-3;
+    FluenceOptions fo;
+    fo.photons = o.field.photons;
+    fo.seed = mixBits(o.seed + mixBits(streamKey + 0x6669656c64ULL));
+    fo.threads = o.threads;
+    std::vector<BeamFluence> fields;
+    for (const BeamLineSide& l : lines) {
+        fields.push_back(traceBeamFluence(scene, l, box, fo, o.cancel));
+        if (!fields.back().stats.complete) break;
+    }
+    return std::make_unique<const BeamExcitationField>(std::move(fields));
+}
+
 PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const ObjectiveOptions& objective, const FocalPlane& focus,
                       const Filter& emission, const DetectorOptions& detector, int width, int height, uint64_t streamKey,
                       const AcquireOptions& o, const ChannelImaging& channel) {
@@ -213,8 +261,18 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
     r.stderrElectrons.assign(r.electrons.size(), 0.0);
     std::vector<double> computed(r.electrons.size(), 0.0);
     std::shared_ptr<const EmissionPoints> emissionPoints;
+    std::unique_ptr<const BeamExcitationField> field;
     if (model) {
-        const UnscatteredPlane u = computeUnscatteredImage(scene, tracer.lights(), imaging, *model, o.threads, o.cancel);
+        field = traceExcitationField(scene, tracer, imaging, *model, o, streamKey);
+        if (field) {
+            for (const BeamFluence& f : field->fields()) {
+                r.fieldPhotons += f.stats.photons;
+                r.fieldSeconds += f.stats.seconds;
+                if (!f.stats.complete) r.complete = false;
+            }
+            if (!r.complete) return r;
+        }
+        const UnscatteredPlane u = computeUnscatteredImage(scene, tracer.lights(), imaging, *model, o.threads, o.cancel, field.get());
         if (!u.complete) {
             r.complete = false;
             return r;
@@ -225,6 +283,8 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         r.computedSeconds = u.seconds;
         r.computedTimings = u.timings;
         r.computedImage = u.electrons;
+        r.fieldElectrons = u.fieldElectrons;
+        r.fieldHalfDifference = u.fieldHalfDifference;
     }
     // Each row's totals, kept apart so that threads never share them; summed into the image at the end.
     struct RowTotals {
@@ -282,6 +342,7 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                 const PathImaging pathImaging(imaging, model, emissionPoints.get(), point, o.poolingFraction);
                 pathStart.imaging = &pathImaging;
                 pathStart.labels = o.labels;
+                pathStart.field = field.get();
                 const double uPhi = rng.uniform();  // drawn in the order the streams have always used
                 const double uCos = rng.uniform();
                 const Imaging::CameraStart cameraStart = imaging.cameraStart(scene, bends, focal, uCos, uPhi, wl);

@@ -36,8 +36,21 @@ enum class Estimator { Path, Split };
 const char* estimatorName(Estimator e);
 std::optional<Estimator> estimatorFromName(const std::string& name);
 
+// The scattered excitation as a field (render/fluence_field.h, docs/model.md "The excitation field"), with
+// the split estimator: traced per plane and beam line side over the computed region, out to `halfDepthUm`
+// from the focal plane; the computed image adds the dye it excites there, and paths look it up instead of
+// tracing excitation sub-paths wherever it reaches.
+struct ExcitationFieldOptions {
+    uint64_t photons = 50000;   // per beam line side and plane; 0: the paths estimate the scattered excitation
+    double lateralUm = 4;       // node spacing along the focal plane
+    double axialUm = 0.5;       // node spacing along the axis (across a light sheet)
+    double halfDepthUm = 20;    // how far from the focal plane it reaches (at least the computed region)
+    void validate() const;      // ConfigError naming the option and value
+};
+
 struct AcquireOptions {
     Estimator estimator = Estimator::Split;
+    ExcitationFieldOptions field;
     int spp = 16;                    // path samples per pixel
     UnscatteredOptions unscattered;  // the quadrature of the computed part (split)
     // Light imaged through a first vertex far from focus (its image a disc of radius ρ pixels) is pooled
@@ -76,6 +89,14 @@ struct PlaneImage {
     uint64_t computedPoints = 0;                  // emission points of the computed part's quadrature
     UnscatteredTimings computedTimings;           // where the computed part's time went
     std::vector<double> computedImage;            // the computed part alone (split estimator; empty otherwise)
+    // The excitation field (split estimator with a field): its photons and time over the plane's beam line
+    // sides, the computed electrons its scattered light excites, and per pixel half the difference of that
+    // part's images from the field's two halves: its square estimates the part's variance at the pixel, the
+    // square of its sum over a region that of the region's sum (noise correlated across pixels, which
+    // stderrElectrons does not hold).
+    uint64_t fieldPhotons = 0;
+    double fieldSeconds = 0, fieldElectrons = 0;
+    std::vector<double> fieldHalfDifference;
     std::vector<std::vector<double>> labelledElectrons;  // with AcquireOptions::labels: per key, the paths' re-emissions per pixel
     // Paths traced for the estimate and for adaptive sampling's pilots (0 without a noise target).
     uint64_t pathSamples = 0, pilotSamples = 0;

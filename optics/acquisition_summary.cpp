@@ -45,6 +45,9 @@ std::string AcquisitionSummary::addPlane(size_t slot, int plane, const PlaneImag
     computedTimings_.projection += image.computedTimings.projection;
     computedTimings_.kernelThreadSeconds += image.computedTimings.kernelThreadSeconds;
     nonFinite_ += image.nonFiniteSamples;
+    fieldPhotons_ += image.fieldPhotons;
+    fieldSeconds_ += image.fieldSeconds;
+    fieldSum_ += image.fieldElectrons;
     pathSamples_ += image.pathSamples;
     pilotSamples_ += image.pilotSamples;
     pixels_ += image.electrons.size();
@@ -56,6 +59,8 @@ std::string AcquisitionSummary::addPlane(size_t slot, int plane, const PlaneImag
         if (image.electrons[i] >= cut) {
             mcOverCamera_.push_back(sqr(image.stderrElectrons[i]) / (std::max(0.0, image.electrons[i]) + darkElectrons_ + sqr(readNoise_)));
             if (image.electrons[i] > 0) pathRel_.push_back(image.stderrElectrons[i] / image.electrons[i]);
+            if (!image.fieldHalfDifference.empty())
+                fieldOverCamera_.push_back(sqr(image.fieldHalfDifference[i]) / (std::max(0.0, image.electrons[i]) + darkElectrons_ + sqr(readNoise_)));
         }
     double signal = 0;
     for (double e : image.electrons) signal += e;
@@ -90,6 +95,12 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
         {"computed_timings", "projection_seconds", computedTimings_.projection},
         {"computed_timings", "kernel_thread_seconds", computedTimings_.kernelThreadSeconds},
         {"", "path_thread_seconds", pathSeconds_},
+        // The excitation field (split estimator): the scattered excitation computed, not sampled.
+        {"excitation_field", "photons", double(fieldPhotons_), false, true},
+        {"excitation_field", "seconds", fieldSeconds_},
+        {"excitation_field", "electrons_fraction", fieldSum_ / total},
+        // Its noise (correlated across pixels; from the field's two halves) over the camera's, brightest 10 %.
+        {"excitation_field", "median_noise_over_camera_variance_top10", median(fieldOverCamera_), fieldOverCamera_.empty()},
         {"", "median_relative_stderr_top10", median(pathRel_)},
         {"", "non_finite_samples", double(nonFinite_), false, true},
         {"", "largest_sample_over_pixel", largestOverPixel_},

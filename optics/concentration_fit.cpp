@@ -394,6 +394,9 @@ std::vector<double> scatteredLight(const Scene& scene, const Microscope& m, cons
     std::vector<double> out(stackPixels, 0.0);
     AcquireOptions a = o.acquisition;
     a.estimator = Estimator::Split;
+    // The operator's columns hold the unscattered image only, so the paths carry all the rest here,
+    // scattered excitation included (no excitation field).
+    a.field.photons = 0;
     a.spp = o.scatteredSpp;
     a.noiseRatio.reset();
     a.progress = nullptr;
@@ -429,6 +432,7 @@ LabelledScatter scatteredByLabel(const Scene& scene, const Microscope& m, const 
     out.perKey.assign(keys.size(), std::vector<double>(stackPixels, 0.0));
     AcquireOptions a = o.acquisition;
     a.estimator = Estimator::Split;
+    a.field.photons = 0;  // as in scatteredLight
     a.spp = o.scatteredSpp;
     a.noiseRatio.reset();
     a.progress = nullptr;

@@ -207,9 +207,21 @@ EmissionGains::EmissionGains(const Scene& scene, const EmissionLattice& lattice,
 }
 
 void EmissionGains::planeGains(const std::vector<Light>& lights, double planeOffsetMm, size_t first, size_t last, std::vector<double>& out,
-                               int threads) const {
+                               int threads, const BeamExcitationField* field, FieldGains* fieldGains) const {
     const std::vector<LineSide> sides = lineSides(lights);
     if (sides.size() != sides_) throw ConfigError("emission gains: the plane's beams differ from the stack's");
+    // Each side's field, if any.
+    std::vector<int> fieldOf(sides.size(), -1);
+    if (field)
+        for (size_t s = 0; s < sides.size(); ++s)
+            for (size_t f = 0; f < field->fields().size(); ++f) {
+                const BeamLineSide& l = field->fields()[f].line;
+                if (l.profile == sides[s].profile && l.side == sides[s].side && l.lambdaNm == sides[s].lambdaNm) fieldOf[s] = static_cast<int>(f);
+            }
+    if (fieldGains) {
+        fieldGains->scattered.assign((last - first) * static_cast<size_t>(lattice_.slots()), 0.0);
+        fieldGains->halfDifference.assign(fieldGains->scattered.size(), 0.0);
+    }
     const LatticeGeometry& g = lattice_.geometry();
     const int slots = lattice_.slots();
     out.assign((last - first) * static_cast<size_t>(slots), 0.0);
@@ -228,15 +240,27 @@ void EmissionGains::planeGains(const std::vector<Light>& lights, double planeOff
     const size_t lines = dyes_.lineLambda.size();
     constexpr size_t kChunk = 4096;
     parallelFor((last - first + kChunk - 1) / kChunk, threads, [&](size_t chunk) {
-        std::vector<double> excitation(lines);
+        std::vector<double> excitation(lines), scattered(lines), difference(lines);
         for (size_t p = first + chunk * kChunk; p < std::min(last, first + (chunk + 1) * kChunk); ++p) {
             const LatticePoint& q = lattice_.point(p);
             const Vec3 w = g.world(q.x, q.y, q.z);
             std::fill(excitation.begin(), excitation.end(), 0.0);
+            std::fill(scattered.begin(), scattered.end(), 0.0);
+            std::fill(difference.begin(), difference.end(), 0.0);
             bool lit = false;
             for (size_t s = 0; s < sides.size(); ++s) {
                 const LineSide& side = sides[s];
                 if (!side.profile->inCore(w, side.side, side.lambdaNm)) continue;
+                if (fieldOf[s] >= 0) {
+                    const auto f = static_cast<size_t>(fieldOf[s]);
+                    const double phi = field->scattered(f, w);
+                    if (phi != 0) {
+                        excitation[side.line] += phi;
+                        scattered[side.line] += phi;
+                        lit = true;
+                        if (fieldGains) difference[side.line] += 0.5 * (field->scattered(f, w, 0) - field->scattered(f, w, 1));
+                    }
+                }
                 const double E = side.profile->irradiance(w, side.side, side.lambdaNm) * kMm2PerM2 * side.weight;
                 if (!(E > 0)) continue;
                 excitation[side.line] += E * static_cast<double>(beamT_[p * sides_ + s]);
@@ -248,9 +272,18 @@ void EmissionGains::planeGains(const std::vector<Light>& lights, double planeOff
                 if (!(base > 0)) continue;
                 const int dyeIndex = dyes_.firstOfMedium[static_cast<size_t>(q.medium)] + slot;
                 const EmittingDye& d = dyes_.dyes[static_cast<size_t>(dyeIndex)];
-                double absorbed = 0;  // Σ_l E T σa(λ_l; 1 M) λ_l
-                for (size_t l = 0; l < lines; ++l) absorbed += excitation[l] * d.absorptionPerMolar[l] * dyes_.lineLambda[l];
-                out[(p - first) * static_cast<size_t>(slots) + static_cast<size_t>(slot)] = base * absorbed * immersion[static_cast<size_t>(dyeIndex)];
+                auto absorbed = [&](const std::vector<double>& irradiance) {  // Σ_l E T σa(λ_l; 1 M) λ_l
+                    double a = 0;
+                    for (size_t l = 0; l < lines; ++l) a += irradiance[l] * d.absorptionPerMolar[l] * dyes_.lineLambda[l];
+                    return a;
+                };
+                const double factor = base * immersion[static_cast<size_t>(dyeIndex)];
+                const size_t at = (p - first) * static_cast<size_t>(slots) + static_cast<size_t>(slot);
+                out[at] = factor * absorbed(excitation);
+                if (fieldGains) {
+                    fieldGains->scattered[at] = factor * absorbed(scattered);
+                    fieldGains->halfDifference[at] = factor * absorbed(difference);
+                }
             }
         }
     });

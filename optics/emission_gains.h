@@ -17,6 +17,7 @@
 
 #include "optics/emission_lattice.h"
 #include "optics/imaging.h"
+#include "render/fluence_field.h"
 
 namespace fluorosim::optics {
 
@@ -44,8 +45,15 @@ public:
                   const Imaging& reference, const TransmittanceOptions& options, int threads, const std::atomic<bool>* cancel = nullptr);
 
     // Gains of points [first, last) for the plane at `planeOffsetMm` lit by `lights` (that plane's lights),
-    // into out[(p − first) × slots + slot]: photoelectrons per mol/L. Zero outside every core.
-    void planeGains(const std::vector<Light>& lights, double planeOffsetMm, size_t first, size_t last, std::vector<double>& out, int threads) const;
+    // into out[(p − first) × slots + slot]: photoelectrons per mol/L. Zero outside every core. With
+    // `field` (the plane's excitation field, for the same lights) each core adds its beam's scattered
+    // light too; then `fieldGains`, if given, receives the scattered light's part of the gains and half
+    // the difference of the field's two halves (the field's own noise), laid out as `out`.
+    struct FieldGains {
+        std::vector<double> scattered, halfDifference;
+    };
+    void planeGains(const std::vector<Light>& lights, double planeOffsetMm, size_t first, size_t last, std::vector<double>& out, int threads,
+                    const BeamExcitationField* field = nullptr, FieldGains* fieldGains = nullptr) const;
 
     bool complete() const { return complete_; }
     double seconds() const { return seconds_; }

@@ -6,6 +6,7 @@
 
 #include "core/errors.h"
 #include "core/math.h"
+#include "core/sampling.h"
 
 namespace fluorosim::optics {
 namespace {
@@ -225,6 +226,38 @@ BeamCore LightSheet::coreAlong(const Ray& ray, int side, double lambdaNm) const 
         }
     }
     return core;
+}
+
+std::optional<BeamProfile::CrossSectionPoint> LightSheet::sampleCrossSection(const Vec3& axisPoint, int side, double lambdaNm, double u1,
+                                                                             double u2) const {
+    checkSide(side, sides(), "light sheet");
+    const double x = local(axisPoint).x;
+    const Vec3 onAxis = centre_ + u_ * x;
+    const double sigma = 0.5 * waistAt(x, lambdaNm);
+    // Truncated at 8 deviations: 1.2e-15 of the profile lies beyond.
+    double pdfZ = 0;
+    const double z = sampleTruncatedNormal(u1, 0.0, sigma, -8 * sigma, 8 * sigma, &pdfZ);
+    const double height = options_.heightMm;
+    double y = 0, pdfY = 0;
+    if (options_.mode == SheetMode::Static && options_.heightProfile == HeightProfile::Gaussian) {
+        const double sy = height / 4;
+        y = sampleTruncatedNormal(u2, 0.0, sy, -8 * sy, 8 * sy, &pdfY);
+    } else {
+        const double half = 0.5 * height + (options_.mode == SheetMode::Scanned ? 3 * sigma * 2 : 0.0);
+        y = (2 * u2 - 1) * half;
+        pdfY = 1 / (2 * half);
+    }
+    if (!(pdfZ > 0) || !(pdfY > 0)) return std::nullopt;
+    return CrossSectionPoint{onAxis + n_ * z + h_ * y, pdfZ * pdfY};
+}
+
+std::optional<BeamProfile::CrossSectionPoint> WidefieldIllumination::sampleCrossSection(const Vec3& axisPoint, int side, double, double u1,
+                                                                                        double u2) const {
+    checkSide(side, 1, "widefield");
+    const Vec3 onAxis = options_.centreMm + axis_ * dot(axisPoint - options_.centreMm, axis_);
+    const Frame f = Frame::fromNormal(axis_);
+    const double r = radiusMm_ * std::sqrt(u1), phi = 2 * kPi * u2;
+    return CrossSectionPoint{onAxis + f.toWorld(Vec3(r * std::cos(phi), r * std::sin(phi), 0)), 1 / (kPi * radiusMm_ * radiusMm_)};
 }
 
 void WidefieldOptions::validate() const {

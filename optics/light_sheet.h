@@ -150,6 +150,10 @@ public:
     static constexpr double kCoreWidths = 2.0;
     bool inCore(const Vec3& p, int side, double lambdaNm) const override;
     BeamCore coreAlong(const Ray& ray, int side, double lambdaNm) const override;
+    // Across the sheet the normal density of its profile at w(x); along the height uniform over the top
+    // hat (and 3 w beyond it for a scanned sheet, e^-18 of its edge), or the Gaussian height's density.
+    std::optional<Vec3> axisPoint() const override { return centre_; }
+    std::optional<CrossSectionPoint> sampleCrossSection(const Vec3& axisPoint, int side, double lambdaNm, double u1, double u2) const override;
 
     // Waist w0 at λ (the given waist, or from the NA), zR and the 1/e² half-width w(x) at λ.
     double waistMm(double lambdaNm) const;
@@ -198,6 +202,9 @@ public:
     const Spectrum& spectrum() const override { return spectrum_; }
     // Core: the whole illuminated cylinder (the field does not fall off with depth); uniform proposal.
     bool inCore(const Vec3& p, int side, double lambdaNm) const override;
+    // Uniform over the field's disc.
+    std::optional<Vec3> axisPoint() const override { return options_.centreMm; }
+    std::optional<CrossSectionPoint> sampleCrossSection(const Vec3& axisPoint, int side, double lambdaNm, double u1, double u2) const override;
     BeamCore coreAlong(const Ray& ray, int side, double lambdaNm) const override;
 
 private:

@@ -27,6 +27,15 @@ public:
     BeamCore coreAlong(const Ray& ray, int side, double lambdaNm) const override {
         return beam_->coreAlong(Ray{ray.o - shift_, ray.d}, side, lambdaNm);
     }
+    std::optional<Vec3> axisPoint() const override {
+        const auto p = beam_->axisPoint();
+        return p ? std::optional<Vec3>(*p + shift_) : std::nullopt;
+    }
+    std::optional<CrossSectionPoint> sampleCrossSection(const Vec3& axisPoint, int side, double lambdaNm, double u1, double u2) const override {
+        auto c = beam_->sampleCrossSection(axisPoint - shift_, side, lambdaNm, u1, u2);
+        if (c) c->p = c->p + shift_;
+        return c;
+    }
 
 private:
     std::shared_ptr<BeamProfile> beam_;
@@ -45,6 +54,10 @@ public:
     const Spectrum& spectrum() const override { return beam_->spectrum(); }
     bool inCore(const Vec3& p, int side, double lambdaNm) const override { return beam_->inCore(p, side, lambdaNm); }
     BeamCore coreAlong(const Ray& ray, int side, double lambdaNm) const override { return beam_->coreAlong(ray, side, lambdaNm); }
+    std::optional<Vec3> axisPoint() const override { return beam_->axisPoint(); }
+    std::optional<CrossSectionPoint> sampleCrossSection(const Vec3& axisPoint, int side, double lambdaNm, double u1, double u2) const override {
+        return beam_->sampleCrossSection(axisPoint, side, lambdaNm, u1, u2);
+    }
 
 private:
     std::shared_ptr<BeamProfile> beam_;

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <mutex>
+#include <tuple>
 
 #include "core/errors.h"
 #include "core/math.h"
@@ -324,30 +325,44 @@ PointEmission pointEmission(const LatticeGeometry& g, const LatticePoint& q, dou
 }
 
 std::vector<PointEmission> planeEmissions(const UnscatteredModel& model, const EmissionLattice& lattice, const EmissionGains& gains,
-                                          const std::vector<Light>& lights, double planeOffsetMm, int threads) {
+                                          const std::vector<Light>& lights, double planeOffsetMm, int threads, const BeamExcitationField* field,
+                                          std::vector<PointEmission>* fieldEmissions) {
     const LatticeGeometry& g = model.geometry();
     const auto [first, last] = lattice.zRange(planeOffsetMm - g.halfDepthMm(), planeOffsetMm + g.halfDepthMm());
     std::vector<double> gain;
-    gains.planeGains(lights, planeOffsetMm, first, last, gain, threads);
+    EmissionGains::FieldGains fieldGains;
+    gains.planeGains(lights, planeOffsetMm, first, last, gain, threads, field, fieldEmissions ? &fieldGains : nullptr);
     const int slots = lattice.slots();
     std::vector<PointEmission> out;
+    if (fieldEmissions) fieldEmissions->clear();
     for (size_t p = first; p < last; ++p) {
         const LatticePoint& q = lattice.point(p);
         PointEmission em = pointEmission(g, q, planeOffsetMm);
         const int firstDye = model.dyes().firstOfMedium[static_cast<size_t>(q.medium)];
         for (int slot = 0; slot < slots; ++slot) {
-            const double e = gain[(p - first) * static_cast<size_t>(slots) + static_cast<size_t>(slot)] * lattice.concentration(p, slot);
+            const size_t at = (p - first) * static_cast<size_t>(slots) + static_cast<size_t>(slot);
+            const double c = lattice.concentration(p, slot);
+            const double e = gain[at] * c;
             if (!(e > 0)) continue;
             em.e = e;
             em.dye = static_cast<uint32_t>(firstDye + slot);
+            em.target = 0;
             out.push_back(em);
+            if (fieldEmissions && fieldGains.scattered[at] > 0) {
+                PointEmission part = em;
+                part.e = fieldGains.scattered[at] * c;
+                fieldEmissions->push_back(part);
+                part.e = fieldGains.halfDifference[at] * c;
+                part.target = 1;
+                if (part.e != 0) fieldEmissions->push_back(part);
+            }
         }
     }
     return out;
 }
 
 UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<Light>& lights, const Imaging& plane, const UnscatteredModel& model,
-                                         int threads, const std::atomic<bool>* cancel) {
+                                         int threads, const std::atomic<bool>* cancel, const BeamExcitationField* field) {
     const auto start = std::chrono::steady_clock::now();
     UnscatteredPlane out;
     out.electrons.assign(static_cast<size_t>(plane.width()) * plane.height(), 0.0);
@@ -364,13 +379,50 @@ UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<L
         return out;
     }
     t = std::chrono::steady_clock::now();
-    const std::vector<PointEmission> emissions = planeEmissions(model, *lattice, *gains, lights, offset, threads);
+    std::vector<PointEmission> fieldParts;
+    std::vector<PointEmission> emissions = planeEmissions(model, *lattice, *gains, lights, offset, threads, field, field ? &fieldParts : nullptr);
     out.timings.gains = secondsSince(t);
     out.points = emissions.size();
     t = std::chrono::steady_clock::now();
     const PsfProjector& projector = model.projector(offset);
     const double kernelsBefore = projector.kernelSeconds();
+    // The field's noise: the image of half the difference of its halves, from the points of each pixel's
+    // column, layer and dye gathered at the pixel's centre (a quarter of the points: where in the pixel a
+    // point lies matters to its image, not to the size of the noise).
+    double fieldEmitted = 0, emitted = 0;
+    for (const PointEmission& em : emissions) emitted += em.e;
+    std::vector<PointEmission> halfDifference;
+    for (PointEmission em : fieldParts) {
+        if (em.target == 0) {
+            fieldEmitted += em.e;
+            continue;
+        }
+        em.target = 0;
+        em.u = std::floor(em.u) + 0.5;
+        em.v = std::floor(em.v) + 0.5;
+        halfDifference.push_back(em);
+    }
+    std::sort(halfDifference.begin(), halfDifference.end(), [](const PointEmission& a, const PointEmission& b) {
+        return std::tie(a.v, a.u, a.layer, a.dye) < std::tie(b.v, b.u, b.layer, b.dye);
+    });
+    size_t kept = 0;
+    for (size_t i = 0; i < halfDifference.size(); ++i) {
+        const PointEmission& em = halfDifference[i];
+        if (kept > 0) {
+            PointEmission& last = halfDifference[kept - 1];
+            if (last.u == em.u && last.v == em.v && last.layer == em.layer && last.dye == em.dye) {
+                last.e += em.e;
+                continue;
+            }
+        }
+        halfDifference[kept++] = em;
+    }
+    halfDifference.resize(kept);
     std::vector<std::vector<double>> images = projector.project(emissions, 1, threads, cancel);
+    if (field && !images.empty()) {
+        std::vector<std::vector<double>> noise = projector.project(halfDifference, 1, threads, cancel, ProjectorParts::WithoutTail);
+        if (!noise.empty()) out.fieldHalfDifference = std::move(noise[0]);
+    }
     if (images.empty() || (cancel && cancel->load())) {
         out.complete = false;
         return out;
@@ -379,6 +431,12 @@ UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<L
     out.timings.projection = secondsSince(t);
     // The FFT leaves round-off of both signs (about 1e-16 of the largest value) where the far part is 0.
     for (size_t i = 0; i < out.electrons.size(); ++i) out.electrons[i] = std::max(0.0, images[0][i]);
+    // The field's share of what the points emit, applied to what lands on the camera.
+    if (emitted > 0) {
+        double total = 0;
+        for (double e : out.electrons) total += e;
+        out.fieldElectrons = total * fieldEmitted / emitted;
+    }
 
     const LatticeGeometry& g = model.geometry();
     auto emission = std::make_shared<EmissionPoints>(plane, g.xLeft(), g.yTop(), -g.halfDepthMm(), g.lateralMm(), g.axialMm);

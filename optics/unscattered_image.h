@@ -101,6 +101,11 @@ struct UnscatteredPlane {
     UnscatteredTimings timings;
     bool complete = true;           // false when cancelled
     std::shared_ptr<const EmissionPoints> emission;
+    // With an excitation field: the electrons its scattered light excites (part of `electrons`), and per
+    // pixel half the difference of the field's two halves summed over the points under it, whose square
+    // bounds the variance of that part (the field's noise, correlated across pixels; empty without a field).
+    double fieldElectrons = 0;
+    std::vector<double> fieldHalfDifference;
 };
 
 // What the computed image of one channel needs, for every plane of a stack: the emitting dyes as the
@@ -147,14 +152,20 @@ private:
 };
 
 // The computed unscattered image of `plane` lit by `lights` (the channel's lights at this plane).
+// With `field` (the plane's excitation field for the same lights), the dye its scattered light excites
+// in the region too.
 UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<Light>& lights, const Imaging& plane,
-                                         const UnscatteredModel& model, int threads = 0, const std::atomic<bool>* cancel = nullptr);
+                                         const UnscatteredModel& model, int threads = 0, const std::atomic<bool>* cancel = nullptr,
+                                         const BeamExcitationField* field = nullptr);
 
 // Where a lattice point lands for the projector in the plane at `planeOffsetMm` (e, dye, target unset).
 PointEmission pointEmission(const LatticeGeometry& geometry, const LatticePoint& point, double planeOffsetMm);
 // The emissions of a plane for the projector: each lattice point lit in the plane, per dye, with e = its
 // gain × its concentration, sent to target 0.
+// With `field`, the scattered excitation too; `fieldEmissions`, if given, receives the field's part of them
+// (its sum, in `e` of target 0) and half the difference of its halves (target 1).
 std::vector<PointEmission> planeEmissions(const UnscatteredModel& model, const EmissionLattice& lattice, const EmissionGains& gains,
-                                          const std::vector<Light>& lights, double planeOffsetMm, int threads);
+                                          const std::vector<Light>& lights, double planeOffsetMm, int threads,
+                                          const BeamExcitationField* field = nullptr, std::vector<PointEmission>* fieldEmissions = nullptr);
 
 }  // namespace fluorosim::optics

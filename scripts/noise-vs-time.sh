@@ -4,7 +4,10 @@
 # scripts/noise_ratio.py (a copy of the workplace tool; median MC variance / shot-noise variance over
 # the brightest 10 % of pixels, the issue's measure, and over the brightest 1 %: the neurites cover only
 # a few per cent of the field, so in clear tissue the brightest 10 % include pixels with no signal at
-# all, equal in both renders). Usage: scripts/noise-vs-time.sh [build/apps/fluorosim] > table.md
+# all, equal in both renders). Tissues: clear, the sample's (sigma_s 1 /mm), sigma_s 2 /mm and uncleared
+# cortex (sigma_s 20 /mm, g 0.9); estimators: split without the excitation field (--field-photons 0,
+# paths carry the scattered excitation), split with it (the default), and with it adaptively.
+# Usage: scripts/noise-vs-time.sh [build/apps/fluorosim] > table.md
 # Needs samples/neurons/neurons.vdb (samples/neurons/make_volume.sh) and python3-numpy/-tifffile.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
@@ -12,11 +15,13 @@ fluorosim=${1:-$here/build/apps/fluorosim}
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 scene=$here/samples/lightsheet/neurons.json
-# The same scene in clear tissue (no scattering; max_depth 200 for the refracting block).
-/usr/bin/python3 - "$scene" "$work/clear.json" <<'PY'
+# The scene with other tissue (max_depth 200 for the refracting block in clear tissue).
+tissue() {  # sigma_s output
+/usr/bin/python3 - "$scene" "$2" "$1" <<'PY'
 import json, os, sys
 j = json.load(open(sys.argv[1]))
-j["media"]["tissue"]["sigma_s"] = "0 /mm"
+j["media"]["tissue"]["sigma_s"] = sys.argv[3]
+j["media"]["tissue"]["g"] = 0.9
 j.setdefault("render", {})["max_depth"] = 200
 base = os.path.dirname(os.path.abspath(sys.argv[1]))
 j["media"]["tissue"]["volume"]["file"] = os.path.join(base, j["media"]["tissue"]["volume"]["file"])
@@ -24,35 +29,39 @@ for s in j["shapes"]:
     if "file" in s: s["file"] = os.path.join(base, s["file"])
 json.dump(j, open(sys.argv[2], "w"))
 PY
-echo "| tissue | estimator | paths per pixel / direct | seconds per plane (2 channels) | median MC / shot variance, top 10 % | top 1 % | relative RMS MC error, top 1 % | sum ratio |"
-echo "| --- | --- | --- | --- | --- | --- | --- | --- |"
-run() {  # tissue scene estimator spp direct [more acquire options]
-    local tag=$1 file=$2 est=$3 spp=$4 direct=$5 seconds=0
-    shift 5
+}
+tissue "0 /mm" "$work/clear.json"
+tissue "2 /mm" "$work/s2.json"
+tissue "20 /mm" "$work/cortex.json"
+echo "| tissue | estimator | paths per pixel | seconds per plane (2 channels) | median MC / shot variance, top 10 % | top 1 % | relative RMS MC error, top 1 % | sum ratio | largest sample / pixel | field noise / shot, top 10 % |"
+echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+run() {  # tissue scene label spp [more acquire options]
+    local tag=$1 file=$2 est=$3 spp=$4
+    shift 4
     for seed in 1 2; do
-        "$fluorosim" acquire "$file" -o "$work/$seed.ome.tif" --planes 1 --seed "$seed" --estimator "$est" --spp "$spp" \
-            --direct-spp "$direct" "$@" > "$work/$seed.json" 2> /dev/null
+        "$fluorosim" acquire "$file" -o "$work/$seed.ome.tif" --planes 1 --seed "$seed" --spp "$spp" "$@" > "$work/$seed.json" 2> /dev/null
     done
     for top in 0.1 0.01; do
         /usr/bin/python3 "$here/scripts/noise_ratio.py" "$work/1.expected.ome.tif" "$work/2.expected.ome.tif" --read-noise 1.4 \
             --top "$top" > "$work/r$top.json"
     done
-    /usr/bin/python3 - "$work" "$tag" "$est" "$spp" "$direct" "$*" <<'PY'
+    /usr/bin/python3 - "$work" "$tag" "$est" "$spp" "$*" <<'PY'
 import json, sys
-work, tag, est, spp, direct, extra = sys.argv[1:]
+work, tag, est, spp, extra = sys.argv[1:]
 r10, r1 = (json.load(open(f"{work}/r{t}.json")) for t in ("0.1", "0.01"))
 s = [json.load(open(f"{work}/{seed}.json")) for seed in (1, 2)]
 seconds = sum(x["seconds"] for x in s) / 2
-paths = f"{sum(x['mean_path_spp'] for x in s) / 2:.0f} (adaptive, {extra})" if extra else spp
-d = direct if est == "split" else "-"
-print(f"| {tag} | {est} | {paths} / {d} | {seconds:.1f} | {r10['median_mc_over_shot_variance']:.3g} | "
-      f"{r1['median_mc_over_shot_variance']:.3g} | {r1['relative_rms_mc_error']:.3g} | {r10['sum_ratio_a_over_b']:.3f} |")
+paths = f"{sum(x['mean_path_spp'] for x in s) / 2:.1f} (adaptive)" if "noise-ratio" in extra else spp
+largest = max(x["largest_sample_over_pixel"] for x in s)
+f = [x["excitation_field"]["median_noise_over_camera_variance_top10"] for x in s]
+field = "-" if f[0] is None else f"{sum(f) / 2:.3g}"
+print(f"| {tag} | {est} | {paths} | {seconds:.1f} | {r10['median_mc_over_shot_variance']:.3g} | "
+      f"{r1['median_mc_over_shot_variance']:.3g} | {r1['relative_rms_mc_error']:.3g} | {r10['sum_ratio_a_over_b']:.3f} | {largest:.2f} | {field} |")
 PY
 }
-for tissue in "sigma_s 1/mm:$scene" "clear:$work/clear.json"; do
+for tissue in "clear:$work/clear.json" "sigma_s 1 /mm:$scene" "sigma_s 2 /mm:$work/s2.json" "cortex, sigma_s 20 /mm:$work/cortex.json"; do
     tag=${tissue%%:*} file=${tissue#*:}
-    run "$tag" "$file" path 16 64
-    run "$tag" "$file" split 4 64
-    run "$tag" "$file" split 16 256
-    run "$tag" "$file" split 4 64 --noise-ratio 0.5 --max-spp 256
+    run "$tag" "$file" "split, no field" 4 --field-photons 0
+    run "$tag" "$file" "split, field" 4
+    run "$tag" "$file" "split, field, --noise-ratio 0.5" 4 --noise-ratio 0.5 --max-spp 64
 done

@@ -52,7 +52,8 @@ std::string fingerprint(const AcquireArgs& a, const optics::Microscope& m, const
     const nlohmann::json j = {{"scene_fnv1a", h}, {"seed", o.seed}, {"spp", o.spp}, {"planes", m.stack.planes}, {"step_mm", m.stack.stepMm},
                               {"channels", channels}, {"estimator", optics::estimatorName(o.estimator)},
                               {"noise_ratio", o.noiseRatio.value_or(0.0)},
-                              {"max_spp", o.noiseRatio ? o.maxSpp : 0}, {"exposure_s", m.detector.exposureS}};
+                              {"max_spp", o.noiseRatio ? o.maxSpp : 0}, {"exposure_s", m.detector.exposureS},
+                              {"field_photons", o.field.photons}};
     return j.dump();
 }
 
@@ -171,6 +172,9 @@ void addAcquireCommand(CLI::App& app) {
                     "Adaptive sampling: paths per pixel (--spp at least) until the Monte Carlo standard error is at most this times the "
                     "camera's noise of the expected signal, sqrt(signal + dark + read^2), decided from separate pilot paths");
     cmd->add_option("--max-spp", a->maxSpp, "Adaptive sampling: most paths per pixel (default 4096)");
+    cmd->add_option("--field-photons", a->fieldPhotons,
+                    "Split estimator: photons per beam line and plane of the excitation field, which computes the scattered excitation "
+                    "instead of sampling it with paths (default 50000; 0: paths only)");
     cmd->add_option("--seed", a->seed, "Random seed (default: the scene's)");
     cmd->add_option("--exposure", a->exposure,
                     "Exposure: a time with a unit (\"20ms\"), or auto[:F]: after the stack is rendered, scale it to the exposure that puts "

@@ -19,8 +19,6 @@ namespace {
 // sliver of medium (measured: 20 nm of a 1 µm dye layer, a 2 % loss) at every crossing.
 double leavingTMin(const Vec3& n, const Vec3& dir, double eps) { return eps / std::max(std::abs(dot(n, dir)), 1e-2); }
 
-// Where scattered emission hands over from branches to connections (emissionMis).
-constexpr double kEmissionMisDistanceMm = 0.004;
 
 // Balance heuristic between the sheet-side strategy (density a per point) and phase sampling (b).
 double sheetMis(double a, double b) { return a + b > 0 ? a / (a + b) : 0.0; }
@@ -44,15 +42,23 @@ namespace {
 bool anyBeam(const std::vector<Light>& lights) {
     return std::any_of(lights.begin(), lights.end(), [](const Light& l) { return std::holds_alternative<BeamLight>(l); });
 }
+std::vector<double> lineWavelengthsOf(const std::vector<Light>& lights) {
+    std::vector<double> lines;
+    for (const Light& l : lights)
+        if (const BeamLight* b = std::get_if<BeamLight>(&l))
+            for (const SpectralLine& line : b->profile->spectrum().spectralLines())
+                if (line.power > 0 && std::find(lines.begin(), lines.end(), line.lambdaNm) == lines.end()) lines.push_back(line.lambdaNm);
+    return lines;
+}
 }  // namespace
 
 PathTracer::PathTracer(const Scene& scene)
     : scene_(scene), lightList_(scene.lights), lights_(scene, lightList_),
-      fluorescence_(scene, lightList_), hasBeams_(anyBeam(lightList_)) {}
+      fluorescence_(scene, lightList_), hasBeams_(anyBeam(lightList_)), lineWavelengths_(lineWavelengthsOf(lightList_)) {}
 
 PathTracer::PathTracer(const Scene& scene, std::vector<Light> lights)
     : scene_(scene), lightList_(std::move(lights)), lights_(scene, lightList_),
-      fluorescence_(scene, lightList_), hasBeams_(anyBeam(lightList_)) {
+      fluorescence_(scene, lightList_), hasBeams_(anyBeam(lightList_)), lineWavelengths_(lineWavelengthsOf(lightList_)) {
     const auto isArea = [](const Light& l) { return std::holds_alternative<AreaLight>(l); };
     if (std::any_of(scene.lights.begin(), scene.lights.end(), isArea) || std::any_of(lightList_.begin(), lightList_.end(), isArea))
         throw ConfigError("a separate light list cannot be used with emitting shapes (their lights are indexed by shape)");
@@ -203,6 +209,7 @@ struct PathTracer::PathState {
     // at the next vertex (sheetScattering).
     bool sheetSampledAtLastVertex = false;
     double lastPhasePdf = 0, lastProposalG = 0, lastFloorExtinction = 0;
+    double lastEmissionExtinction = 0;  // the medium's floor extinction at the vertex, at the hero wavelength (emissionMis)
     // A camera path connected to the computed emission at its last medium vertex (emissionConnection):
     // the branch points of the next free flight weigh the same light by the complement.
     bool emissionSampledAtLastVertex = false;
@@ -213,6 +220,7 @@ struct PathTracer::PathState {
     std::array<SampledSpectrum, kImageLevels> firstSegmentPooled{};
     double tMin = 0;                // > 0 when ray.o lies on the surface the ray leaves
     const EmissionLabels* labels = nullptr;  // camera paths only: split re-emissions by label
+    const ExcitationField* field = nullptr;  // the excitation at lines, looked up where it reaches (all generations)
     std::vector<PathRadiance::Labelled> labelled;
 };
 
@@ -226,6 +234,7 @@ PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths&
     state.r_u = start.r_u;
     state.imaging = start.imaging;
     state.labels = start.labels;
+    state.field = start.field;
     state.tMin = start.tMin;
     state.firstSegment = true;
     state.prevScatter = ray.o;
@@ -238,8 +247,10 @@ PathRadiance PathTracer::meanRadiance(const Vec3& p, int medium, const SampledWa
 }
 
 PathRadiance PathTracer::traceFromEmission(const Vec3& p, int medium, const SampledWavelengths& wl, const SampledSpectrum& beta, int depth,
-                                           int generation, Rng& rng, PathStats& stats, StartBeamWeight startBeam) const {
+                                           int generation, Rng& rng, PathStats& stats, StartBeamWeight startBeam,
+                                           const ExcitationField* field) const {
     PathState state;
+    state.field = field;
     state.ray = Ray{p, Vec3(0, 0, 1)};
     state.medium = medium;
     state.beta = beta;
@@ -253,8 +264,8 @@ PathRadiance PathTracer::traceFromEmission(const Vec3& p, int medium, const Samp
 
 SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double* channels, const SampledWavelengths& wl,
                                          const SampledSpectrum& weight, Rng& rng, PathStats& stats, int generation, int depth,
-                                         StartBeamWeight startBeam, const LabelledChannels* parts, int partCount,
-                                         SampledSpectrum* partResults) const {
+                                         StartBeamWeight startBeam, const ExcitationField* field, const LabelledChannels* parts,
+                                         int partCount, SampledSpectrum* partResults) const {
     for (int i = 0; i < partCount; ++i) partResults[i] = SampledSpectrum(0.0);
     // Generations are ended by roulette; this cap only guards the stack and is reported if reached.
     constexpr int kMaxGenerations = 64;
@@ -290,14 +301,24 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double
     ++stats.fluorescenceBranches;
     // Lx: (1/4π)∫L dω at the excitation wavelengths, times `start`.
     SampledSpectrum Lx(0.0);
-    if (fluorescence_.model() == FluorescenceModel::Paper) {
+    // At a line inside the excitation field the scattered light is looked up and the unscattered light
+    // evaluated, not traced. Where the camera's imaging computes the emission, it holds both inside the
+    // beams' cores, which take the start weight.
+    const double coreWeight = startBeam.imaging && startBeam.imaging->computesUnscatteredAt(p) ? startBeam.weight : 1.0;
+    std::optional<double> scattered;
+    if (field && wlx.discrete && fluorescence_.model() == FluorescenceModel::Full)
+        scattered = field->scatteredMeanRadiance(p, wlx.lambda[0], coreWeight, 1.0);
+    if (scattered) {
+        const double mean = *scattered + unscatteredMeanRadiance(p, medium, wlx.lambda[0], coreWeight, 1.0, rng);
+        for (int k = 0; k < kNumWavelengths; ++k) Lx[k] = start[k] * mean;
+    } else if (fluorescence_.model() == FluorescenceModel::Paper) {
         const double uLight = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform();
         if (const auto ls = lights_.sample(p, uLight, u1, u2, wlx); ls && ls->L && ls->pdf > 0) {
             const double w = computedByImaging(*ls, p, wlx, startBeam.imaging) ? startBeam.weight : 1.0;
             if (w > 0) Lx = start * estimateTransmittance(p, ls->p, medium, wlx, rng, nullptr, 0.0, ls->beam, true).T * ls->L * (w * kInv4Pi / ls->pdf);
         }
     } else {
-        Lx = traceFromEmission(p, medium, wlx, start, depth, generation + 1, rng, stats, startBeam).total();
+        Lx = traceFromEmission(p, medium, wlx, start, depth, generation + 1, rng, stats, startBeam, field).total();
     }
     SampledSpectrum result(0.0);
     for (int k = 0; k < kNumWavelengths; ++k) {
@@ -315,6 +336,50 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double
             }
         }
     return result;
+}
+
+double PathTracer::branchDensityAt(int medium, const double* channels, const SampledWavelengths& wl) const {
+    if (!fluorescence_.active(medium)) return 0.0;
+    const Medium& med = scene_.media[static_cast<size_t>(medium)];
+    const MediumSpectra spec = med.spectra(wl);
+    const std::array<SampledSpectrum, kMaxMediumChannels> perChannel = fluorescence_.branchDensityPerMolar(medium, wl);
+    // Spectral MIS weighs a branch by the mean of its wavelengths' densities (r_e.average()): a hero
+    // wavelength where the dye hardly emits still finds the companions' light.
+    const MediumSample m = spec.at(channels);
+    double mean = 0;
+    for (int j = 0; j < kNumWavelengths; ++j) {
+        double b = 0;
+        for (int c = kFirstDyeChannel; c < spec.channels; ++c) b += perChannel[static_cast<size_t>(c)][j] * channels[c];
+        mean += std::min(b, std::max(m.sigmaA[j] + m.sigmaS[j], fluorescence_.branchDensityCap(medium))) / kNumWavelengths;
+    }
+    return mean;
+}
+
+double PathTracer::floorExtinctionAt(int medium, const SampledWavelengths& wl) const {
+    const Medium& med = scene_.media[static_cast<size_t>(medium)];
+    if (med.isVacuumLike()) return 0.0;
+    const MediumSample fl = med.spectra(wl).at(med.channelFloor().data());
+    return fl.sigmaA[0] + fl.sigmaS[0];
+}
+
+double PathTracer::unscatteredMeanRadiance(const Vec3& y, int medium, double lambdaNm, double coreWeight, double outsideWeight, Rng& rng) const {
+    double total = 0;
+    for (const Light& light : lightList_) {
+        const BeamLight* beam = std::get_if<BeamLight>(&light);
+        if (!beam) continue;
+        const BeamProfile& profile = *beam->profile;
+        for (const SpectralLine& l : profile.spectrum().spectralLines()) {
+            if (l.lambdaNm != lambdaNm || !(l.power > 0)) continue;
+            for (int side = 0; side < profile.sides(); ++side) {
+                const double w = profile.inCore(y, side, lambdaNm) ? coreWeight : outsideWeight;
+                if (!(w > 0)) continue;
+                const double E = profile.irradiance(y, side, lambdaNm) * 1e6 * l.power;
+                if (!(E > 0)) continue;
+                total += w * E * beamTransmittance(y, -profile.direction(side), medium, SampledWavelengths::atLine(lambdaNm, 1.0), rng)[0];
+            }
+        }
+    }
+    return total * kInv4Pi;
 }
 
 PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const {
@@ -477,12 +542,38 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
     // medium's asymmetry (the sheet-side proposal's), which an emission vertex's isotropic phase is not.
     // Scattered emission: from a camera path's medium vertex, a point of the emission the camera's
     // imaging computes (drawn by its density), connected through the medium, with the fluorescence its
-    // beams' unscattered light excites there; combined with finding that point by a branch of the next
-    // free flight. The weights split the two by distance, r²/(r² + r0²) to the connection: a branch
-    // commits the whole free flight to one direction, so a flight along a bright neurite gathers
-    // hundreds of branches, while a connection's 1/r² is what makes it noisy near the vertex. Any
-    // weights that sum to one keep the estimate unbiased.
-    auto emissionMis = [&](double distance) { return distance * distance / (distance * distance + sqr(kEmissionMisDistanceMm)); };
+    // beams' light excites there; combined with finding that point by a branch of the next free flight,
+    // by the balance heuristic over the point: the connection's density per mm³ against the branch's (the
+    // phase pdf of the direction over r², times the branch density at the point and the floor's
+    // transmittance to it). The connection's weight is then bounded by 1/(σ_b T) however close the point
+    // and however sharp the phase lobe that points at it (g = 0.9 raises the phase 190-fold over
+    // isotropic), and far from the vertex the connection takes over from free flights, which commit to
+    // one direction. Any weights that sum to one keep the estimate unbiased.
+    // The connection's share at y (density pc), reached with phase pdf f from a vertex at `distance`.
+    auto emissionMis = [&](double pc, double f, double distance, int yMedium, const double* ch, double extinction) {
+        const double pb = f * branchDensityAt(yMedium, ch, wl) * std::exp(-extinction * distance) / (distance * distance);
+        return pc + pb > 0 ? pc / (pc + pb) : 0.0;
+    };
+    // The unscattered excitation of one beam side (chosen as next-event estimation chooses) at each of its
+    // lines where y lies in its core, as addLine(λ, mean radiance); false when the chosen light is not a beam.
+    auto beamConnectionSource = [&](const Vec3& y, int yMedium, double uLight, double uSide, auto&& addLine) {
+        const size_t count = lightList_.size();
+        const size_t index = std::min(count - 1, static_cast<size_t>(uLight * static_cast<double>(count)));
+        const BeamLight* beam = std::get_if<BeamLight>(&lightList_[index]);
+        if (!beam) return false;
+        const BeamProfile& profile = *beam->profile;
+        const int side = std::min(profile.sides() - 1, static_cast<int>(uSide * profile.sides()));
+        const double select = 1.0 / (static_cast<double>(count) * profile.sides());
+        for (const SpectralLine& l : profile.spectrum().spectralLines()) {
+            if (!(l.power > 0) || !profile.inCore(y, side, l.lambdaNm)) continue;
+            const double E = profile.irradiance(y, side, l.lambdaNm) * 1e6 * l.power;
+            if (!(E > 0)) continue;
+            const double Tb = beamTransmittance(y, -profile.direction(side), yMedium, SampledWavelengths::atLine(l.lambdaNm, 1.0), rng)[0];
+            if (!(Tb > 0)) continue;
+            addLine(l.lambdaNm, kInv4Pi * E * Tb / select);
+        }
+        return true;
+    };
     auto emissionConnection = [&](const Vec3& p, auto&& phasePdf) -> SampledSpectrum {
         const double uCell = rng.uniform(), ux = rng.uniform(), uy = rng.uniform(), uz = rng.uniform(), uLight = rng.uniform(),
                      uSide = rng.uniform();
@@ -501,42 +592,38 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         const Medium& med = scene_.media[static_cast<size_t>(pointMedium)];
         ChannelValues ch;
         med.channelValues(point->p, ch.data());
-        // The excitation by one beam side (chosen as next-event estimation chooses) at each of its lines.
-        const size_t count = lightList_.size();
-        const size_t index = std::min(count - 1, static_cast<size_t>(uLight * static_cast<double>(count)));
-        const BeamLight* beam = std::get_if<BeamLight>(&lightList_[index]);
-        if (!beam) return SampledSpectrum(0.0);
-        const BeamProfile& profile = *beam->profile;
-        const int side = std::min(profile.sides() - 1, static_cast<int>(uSide * profile.sides()));
-        const double select = 1.0 / (static_cast<double>(count) * profile.sides());
         SampledSpectrum source(0.0);
         if (!st.imaging->computesUnscatteredAt(point->p)) return source;
         std::array<LabelledChannels, kMaxLabelsAtPoint> parts;
         std::array<SampledSpectrum, kMaxLabelsAtPoint> partSources;
         const int partCount = st.labels ? st.labels->split(pointMedium, point->p, ch.data(), parts) : 0;
-        for (const SpectralLine& l : profile.spectrum().spectralLines()) {
-            if (!(l.power > 0) || !profile.inCore(point->p, side, l.lambdaNm)) continue;
-            const double E = profile.irradiance(point->p, side, l.lambdaNm) * 1e6 * l.power;
-            if (!(E > 0)) continue;
-            const double Tb = beamTransmittance(point->p, -profile.direction(side), pointMedium, SampledWavelengths::atLine(l.lambdaNm, 1.0), rng)[0];
-            if (!(Tb > 0)) continue;
+        auto addLine = [&](double lambdaNm, double meanRadiance) {
             for (int j = 0; j < kNumWavelengths; ++j) {
-                source[j] += fluorescence_.kernel(pointMedium, ch.data(), l.lambdaNm, wl.lambda[j]) * kInv4Pi * E * Tb / select;
+                source[j] += fluorescence_.kernel(pointMedium, ch.data(), lambdaNm, wl.lambda[j]) * meanRadiance;
                 for (int i = 0; i < partCount; ++i)
                     partSources[static_cast<size_t>(i)][j] +=
-                        fluorescence_.kernel(pointMedium, parts[static_cast<size_t>(i)].channels.data(), l.lambdaNm, wl.lambda[j]) * kInv4Pi * E * Tb / select;
+                        fluorescence_.kernel(pointMedium, parts[static_cast<size_t>(i)].channels.data(), lambdaNm, wl.lambda[j]) * meanRadiance;
             }
+        };
+        if (st.field) {
+            // With the excitation field the computed emission holds the scattered excitation too.
+            for (double lambdaNm : lineWavelengths_) {
+                const double m = st.field->scatteredMeanRadiance(point->p, lambdaNm, 1.0, 0.0).value_or(0.0) +
+                                 unscatteredMeanRadiance(point->p, pointMedium, lambdaNm, 1.0, 0.0, rng);
+                if (m > 0) addLine(lambdaNm, m);
+            }
+        } else if (!beamConnectionSource(point->p, pointMedium, uLight, uSide, addLine)) {
+            return SampledSpectrum(0.0);
         }
         if (!source) return source;
         const SampledSpectrum T = transmittance(p, point->p, medium, wl, rng);
         if (!T) return SampledSpectrum(0.0);
-        const double mis = emissionMis(distance);
+        const double mis = emissionMis(point->pdf, f, distance, pointMedium, ch.data(), medium != kNone ? floorExtinctionAt(medium, wl) : 0.0);
         const SampledSpectrum factor = beta * T * (f * mis / (distance * distance * point->pdf)) / r_u.average();
         for (int i = 0; i < partCount; ++i)
             if (partSources[static_cast<size_t>(i)]) st.labelled.push_back({parts[static_cast<size_t>(i)].key, st.level, factor * partSources[static_cast<size_t>(i)]});
         return factor * source;
     };
-
     auto scatterInMedium = [&](const Vec3& p, const HenyeyGreenstein& phase, double proposalG, StartBeamWeight startBeam) {
         const Vec3 dirIn = ray.d;
         L += directLight(
@@ -564,6 +651,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         lightSampledAtLastVertex = true;
         st.sheetSampledAtLastVertex = sheets;
         st.lastFloorExtinction = floorExtinction;
+        st.lastEmissionExtinction = emission && medium != kNone ? floorExtinctionAt(medium, wl) : 0.0;
         st.emissionSampledAtLastVertex = emission;
         st.lastPhasePdf = phasePdf;
         st.lastProposalG = proposalG;
@@ -639,14 +727,16 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                                     w *= st.imaging->firstVertexWeight(y, wl);
                                     startBeam = {st.imaging, 0.0};
                                 } else if (st.emissionSampledAtLastVertex) {
-                                    const double mis = st.imaging->emissionPointPdf(y) > 0 ? 1 - emissionMis(length(y - prevScatter)) : 1.0;
+                                    const double pc = st.imaging->emissionPointPdf(y);
+                                    const double mis =
+                                        pc > 0 ? 1 - emissionMis(pc, st.lastPhasePdf, length(y - prevScatter), medium, ch.data(), st.lastEmissionExtinction) : 1.0;
                                     startBeam = {st.imaging, mis};
                                 }
                                 std::array<LabelledChannels, kMaxLabelsAtPoint> parts;
                                 std::array<SampledSpectrum, kMaxLabelsAtPoint> partResults;
                                 const int partCount = st.labels ? st.labels->split(medium, y, ch.data(), parts) : 0;
                                 const SampledSpectrum branch = fluorescence(y, medium, ch.data(), wl, w, rng, stats, st.generation, depth, startBeam,
-                                                                            parts.data(), partCount, partResults.data());
+                                                                            st.field, parts.data(), partCount, partResults.data());
                                 Lf += branch;
                                 // On the first segment a branch is imaged at its own level; later, at the first vertex's.
                                 const int level = st.firstSegment && st.imaging ? st.imaging->imageLevel(y) : st.level;

@@ -105,6 +105,19 @@ public:
     virtual int imageLevel(const Vec3& /*y*/) const { return 0; }
 };
 
+// The scattered light of beams at spectral lines, computed rather than sampled (render/fluence_field.h):
+// a fluorescence branch at a line adds it to the beams' unscattered light (next to the branch, exactly)
+// instead of tracing an excitation sub-path, whose scattered part reaches a thin sheet only by chance,
+// with weights 10³ times the mean.
+class ExcitationField {
+public:
+    virtual ~ExcitationField() = default;
+    // (1/4π) × the fluence rate at y of the light of every beam side at this line that has scattered at
+    // least once (W/m², as a beam's E in next-event estimation), each side's weighed by coreWeight where y
+    // lies in its core and by outsideWeight elsewhere; nullopt where the field does not reach y.
+    virtual std::optional<double> scatteredMeanRadiance(const Vec3& y, double lambdaNm, double coreWeight = 1, double outsideWeight = 1) const = 0;
+};
+
 // What sampling before a camera path gave each wavelength: a caller that draws part of the path itself
 // (a PSF displacement at the hero wavelength) passes the throughput f_j/p_0 and the pdf ratios p_j/p_0
 // of that part, so that the tracer's spectral MIS weighs the whole path (pbrt-v4 passes beta and r_u
@@ -113,6 +126,7 @@ struct PathStart {
     SampledSpectrum beta{1.0}, r_u{1.0};
     const CameraPathImaging* imaging = nullptr;  // none: a plain camera path
     const EmissionLabels* labels = nullptr;      // split the camera path's re-emissions by label (PathRadiance::labelled)
+    const ExcitationField* field = nullptr;      // excitation at lines looked up, not traced, where it reaches
     double tMin = 0;                             // > 0 when ray.o lies on a surface the ray leaves
 };
 
@@ -169,21 +183,30 @@ private:
     PathRadiance trace(PathState& state, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;
     // A path that starts at p in an isotropic direction (a re-emission point) with throughput beta.
     PathRadiance traceFromEmission(const Vec3& p, int medium, const SampledWavelengths& wl, const SampledSpectrum& beta, int depth,
-                                   int generation, Rng& rng, PathStats& stats, StartBeamWeight startBeam = {}) const;
+                                   int generation, Rng& rng, PathStats& stats, StartBeamWeight startBeam = {},
+                                   const ExcitationField* field = nullptr) const;
     // Radiance re-emitted at p towards the path, at the camera wavelengths, for a branch whose
     // source-term estimate is multiplied by `weight` (throughput over branch pdf, MIS-normalized).
     // With `parts`, also each part's share of the result (partResults[i] for parts[i]).
     SampledSpectrum fluorescence(const Vec3& p, int medium, const double* channels, const SampledWavelengths& wl,
                                  const SampledSpectrum& weight, Rng& rng, PathStats& stats, int generation, int depth,
-                                 StartBeamWeight startBeam, const LabelledChannels* parts = nullptr, int partCount = 0,
-                                 SampledSpectrum* partResults = nullptr) const;
+                                 StartBeamWeight startBeam, const ExcitationField* field, const LabelledChannels* parts = nullptr,
+                                 int partCount = 0, SampledSpectrum* partResults = nullptr) const;
     int mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const Vec3& dir, int current) const;
+    // (1/4π) Σ E T over every side of every beam with a line at λ, at y: the unscattered excitation, the
+    // light inside a beam's core weighed by coreWeight and outside it by outsideWeight.
+    double unscatteredMeanRadiance(const Vec3& y, int medium, double lambdaNm, double coreWeight, double outsideWeight, Rng& rng) const;
+    // The density (1/mm) of fluorescence branch points at a point with these channels, as a free flight in
+    // `medium` samples them, averaged over the wavelengths; and the medium's floor extinction there.
+    double branchDensityAt(int medium, const double* channels, const SampledWavelengths& wl) const;
+    double floorExtinctionAt(int medium, const SampledWavelengths& wl) const;
 
     const Scene& scene_;
     std::vector<Light> lightList_;
     LightSampler lights_;
     FluorescencePlan fluorescence_;
     bool hasBeams_ = false;  // some light is a beam: the sheet-side strategy runs at its lines
+    std::vector<double> lineWavelengths_;  // the beams' spectral lines, each once
 };
 
 }  // namespace fluorosim

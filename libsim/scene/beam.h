@@ -41,6 +41,20 @@ public:
     // e^-32 of its peak); outside the core paths keep the beam. Default: no core.
     virtual bool inCore(const Vec3& /*p*/, int /*side*/, double /*lambdaNm*/) const { return false; }
     virtual BeamCore coreAlong(const Ray& /*ray*/, int /*side*/, double /*lambdaNm*/) const { return {}; }
+
+    // What a forward tracer of the beam's light needs (render/fluence_field.h): a point of its axis, and a
+    // point of the cross-section through `axisPoint` (normal to the direction) drawn roughly in
+    // proportion to the irradiance there, with its density per mm² (any density that covers the profile
+    // keeps the tracer unbiased). Default: none, and no field is traced for the beam.
+    struct CrossSectionPoint {
+        Vec3 p;
+        double pdf = 0;
+    };
+    virtual std::optional<Vec3> axisPoint() const { return std::nullopt; }
+    virtual std::optional<CrossSectionPoint> sampleCrossSection(const Vec3& /*axisPoint*/, int /*side*/, double /*lambdaNm*/, double /*u1*/,
+                                                                double /*u2*/) const {
+        return std::nullopt;
+    }
 };
 
 // Solutions t of a t² + b t + c <= 0 (a quadric region crossed by a ray), as at most two intervals,

@@ -457,6 +457,8 @@ TEST(AcquireCli, BadNumbersAreRejectedNotCast) {
         {{}, {"--noise-ratio", "inf"}, {"--noise-ratio", "inf"}},
         {{}, {"--max-spp", "64"}, {"--max-spp", "--noise-ratio"}},
         {{}, {"--noise-ratio", "0.5", "--max-spp", "0"}, {"--max-spp", "[spp = 1", "0"}},
+        {{}, {"--field-photons", "1"}, {"--field-photons", "[2, 2^40]", "1"}},
+        {{}, {"--field-photons", "-5"}, {"--field-photons", "-5"}},
     };
     for (const auto& [edit, extra, parts] : cases) {
         const auto r = run(edit, extra);

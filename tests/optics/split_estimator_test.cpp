@@ -57,7 +57,7 @@ Scene filamentScene(double sigmaS) {
 }
 
 optics::PlaneImage render(const Scene& scene, optics::Estimator estimator, int spp, uint64_t seed,
-                          std::optional<double> noiseRatio = std::nullopt) {
+                          std::optional<double> noiseRatio = std::nullopt, uint64_t fieldPhotons = optics::ExcitationFieldOptions{}.photons) {
     optics::ObjectiveOptions objective;
     objective.na = 0.5;
     objective.magnification = 6.5 / 1.5;  // 1.5 µm object pixels: the field spans 36 µm
@@ -72,6 +72,7 @@ optics::PlaneImage render(const Scene& scene, optics::Estimator estimator, int s
     o.seed = seed;
     o.noiseRatio = noiseRatio;
     o.maxSpp = 1024;
+    o.field.photons = fieldPhotons;
     return optics::renderPlane(scene, objective, optics::FocalPlane{}, optics::Filter::bandPass(band), detector, kSize, kSize, o);
 }
 
@@ -79,26 +80,38 @@ struct CropSum {
     double sum = 0, variance = 0;
 };
 
+// The crop's sum and its variance: the paths' per pixel, and the excitation field's, correlated across
+// pixels, from its two halves.
 CropSum crop(const optics::PlaneImage& r, int x0, int y0, int size) {
     CropSum c;
+    double field = 0;
     for (int y = y0; y < y0 + size; ++y)
         for (int x = x0; x < x0 + size; ++x) {
             const size_t i = static_cast<size_t>(y * r.width + x);
             c.sum += r.electrons[i];
             c.variance += r.stderrElectrons[i] * r.stderrElectrons[i];
+            if (!r.fieldHalfDifference.empty()) field += r.fieldHalfDifference[i];
         }
+    c.variance += field * field;
     return c;
 }
 
-void expectSameImage(double sigmaS, int pathSpp, int splitSpp) {
+void expectSameImage(double sigmaS, int pathSpp, int splitSpp, uint64_t fieldPhotons = optics::ExcitationFieldOptions{}.photons) {
     const Scene scene = filamentScene(sigmaS);
     const optics::PlaneImage path = render(scene, optics::Estimator::Path, pathSpp, 11);
-    const optics::PlaneImage split = render(scene, optics::Estimator::Split, splitSpp, 12);
-    std::printf("  sigma_s %.0f/mm: path %.1f s, split %.1f s (computed part %.3g of %.3g e-)\n", sigmaS, path.seconds, split.seconds,
-                split.computedElectrons, split.computedElectrons + split.pathElectrons);
+    const optics::PlaneImage split = render(scene, optics::Estimator::Split, splitSpp, 12, std::nullopt, fieldPhotons);
+    std::printf("  sigma_s %.0f/mm: path %.1f s, split %.1f s (computed part %.3g of %.3g e-, of it the excitation field's %.3g e-, %.2f s)\n",
+                sigmaS, path.seconds, split.seconds, split.computedElectrons, split.computedElectrons + split.pathElectrons, split.fieldElectrons,
+                split.fieldSeconds);
     EXPECT_GT(split.computedElectrons, 0.0);
     if (sigmaS > 0) {
         EXPECT_GT(split.pathElectrons, 0.01 * split.computedElectrons);  // both parts carry signal
+        if (fieldPhotons > 0) {  // the field lights the filament in the sheet, and its noise is estimated
+            EXPECT_GT(split.fieldElectrons, 0.05 * split.computedElectrons);
+            EXPECT_EQ(split.fieldHalfDifference.size(), split.electrons.size());
+        } else {
+            EXPECT_EQ(split.fieldElectrons, 0.0);
+        }
     }
     // The whole image and its four quadrants.
     const int h = kSize / 2;
@@ -115,6 +128,8 @@ void expectSameImage(double sigmaS, int pathSpp, int splitSpp) {
 TEST(SplitEstimator, MatchesThePathEstimatorInClearTissue) { expectSameImage(0.0, 256, 4); }
 
 TEST(SplitEstimator, MatchesThePathEstimatorInScatteringTissue) { expectSameImage(2.0, 1024, 1024); }
+
+TEST(SplitEstimator, MatchesThePathEstimatorInScatteringTissueWithoutTheField) { expectSameImage(2.0, 1024, 1024, 0); }
 
 // Adaptive sampling (AcquireOptions::noiseRatio) decides each pixel's number of paths from pilot paths
 // it then discards, so its mean is that of the fixed-spp estimator; it spends the paths where the

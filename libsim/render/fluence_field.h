@@ -1,0 +1,119 @@
+#pragma once
+// The scattered excitation of beams at spectral lines as a field, not as paths (docs/model.md, "The
+// excitation field"). Photons leave each beam where its unscattered light first scatters (drawn in
+// proportion to σs E T along the beam and across its profile), are traced forward through the scene
+// (analog delta tracking, Fresnel at smooth dielectrics) and lay their track length into a fluence grid
+// with tent (hat) weights; the grid is read by trilinear interpolation, so its resolution error is O(h²).
+// The grid is a box in a frame with anisotropic nodes: fine along `axis` (across a light sheet, where the
+// fluence varies on the waist's scale) and coarse along the two others. Two halves of the photons are
+// kept apart, so that the field's own noise, which is correlated across the pixels it lights, can be
+// estimated from their difference.
+//
+// The fluence rate φ is in the units of a beam's E in next-event estimation: W/m² per unit of the scene's
+// radiance scale, so that (1/4π)(E T + φ) is the mean radiance at the line that excites a dye.
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "render/path_tracer.h"
+#include "scene/scene.h"
+
+namespace fluorosim {
+
+// A box in a frame: |x| <= halfX along `right`, |y| <= halfY along `up`, |z| <= halfZ along `axis`, from
+// `centre` (mm), with node spacings hx, hy, hz (mm).
+struct FieldBox {
+    Vec3 centre, right{1, 0, 0}, up{0, 1, 0}, axis{0, 0, 1};
+    double halfX = 0, halfY = 0, halfZ = 0;
+    double hx = 0.004, hy = 0.004, hz = 0.0005;
+    bool contains(const Vec3& p) const;
+    void validate() const;  // ConfigError naming the field and value
+};
+
+// Tent tallies on the nodes of a box, one node beyond each face, so that every node a lookup inside the
+// box needs has its whole support inside the tallied range.
+class FluenceGrid {
+public:
+    explicit FluenceGrid(const FieldBox& box);
+    const FieldBox& box() const { return box_; }
+    size_t nodes() const { return values_.size(); }
+    // Adds weight × ∫ hat_node along the segment [a, b] (world, mm) to every node, exactly (the hats'
+    // product is cubic along a cell's piece: two Gauss–Legendre points).
+    void deposit(const Vec3& a, const Vec3& b, double weight);
+    // Trilinear interpolation of the node values (0 outside the box).
+    double at(const Vec3& p) const;
+    // Turns tallies (weight × mm) into fluence: divided by `photons` and each node's hat volume inside
+    // the tallied range.
+    void normalise(double photons);
+    void add(const FluenceGrid& o);
+    void scale(double s);
+    std::vector<double>& values() { return values_; }
+    const std::vector<double>& values() const { return values_; }
+    int nx() const { return n_[0]; }
+    int ny() const { return n_[1]; }
+    int nz() const { return n_[2]; }
+
+private:
+    FieldBox box_;
+    std::array<int, 3> n_{};
+    std::array<double, 3> origin_{}, h_{};  // node 0's local coordinates and spacings
+    std::vector<double> values_;
+    size_t index(int i, int j, int k) const { return (static_cast<size_t>(k) * n_[1] + j) * n_[0] + i; }
+};
+
+// One side of one spectral line of a beam: what a field is traced for.
+struct BeamLineSide {
+    const BeamProfile* profile = nullptr;
+    double lambdaNm = 0, weight = 0;  // the line's share of the beam's normalised spectrum
+    int side = 0;
+};
+// Every side of every line of the beams among `lights` (none when a light is not a beam).
+std::vector<BeamLineSide> beamLineSides(const std::vector<Light>& lights);
+
+struct FluenceOptions {
+    uint64_t photons = 200000;  // per beam line side
+    uint64_t seed = 1;
+    int threads = 0;
+    int maxEvents = 100000;     // per photon: a guard, counted when reached
+    void validate() const;
+};
+
+struct FluenceStats {
+    uint64_t photons = 0, sourced = 0;  // traced, and with a first scattering point of nonzero weight
+    uint64_t truncated = 0;             // stopped by maxEvents
+    double sourcePowerW = 0;            // ∫ σs E T dV over the beam, per unit of the line's weight × W/m² scale
+    double seconds = 0;
+    bool complete = true;
+};
+
+// The scattered light of one beam line side: φ in each half of the photons (even and odd slots).
+struct BeamFluence {
+    BeamLineSide line;
+    FluenceGrid half[2];
+    FluenceGrid mean;  // (half[0] + half[1]) / 2
+    FluenceStats stats;
+};
+
+// Traces the field of one beam line side over `box`. The photons are split over a fixed number of slots,
+// so the field does not depend on the thread count. Throws ConfigError for a beam without a cross-section
+// sampler and when the grid exceeds the memory cap.
+BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const FieldBox& box, const FluenceOptions& options,
+                             const std::atomic<bool>* cancel = nullptr);
+
+// The scattered light of a plane's beams at their lines, as the path tracer looks it up.
+class BeamExcitationField final : public ExcitationField {
+public:
+    explicit BeamExcitationField(std::vector<BeamFluence> fields) : fields_(std::move(fields)) {}
+    std::optional<double> scatteredMeanRadiance(const Vec3& y, double lambdaNm, double coreWeight = 1, double outsideWeight = 1) const override;
+    // φ of field `i` at y (its mean or one half), W/m².
+    double scattered(size_t i, const Vec3& y, int half = -1) const;
+    const std::vector<BeamFluence>& fields() const { return fields_; }
+    bool contains(const Vec3& y) const;
+
+private:
+    std::vector<BeamFluence> fields_;
+};
+
+}  // namespace fluorosim
