@@ -214,8 +214,10 @@ std::unique_ptr<const BeamExcitationField> traceExcitationField(const Scene& sce
     if (o.field.photons == 0 || tracer.fluorescence().model() != FluorescenceModel::Full) return nullptr;
     const std::vector<BeamLineSide> lines = beamLineSides(tracer.lights());
     if (lines.empty()) return nullptr;
-    const bool scatters = std::any_of(scene.media.begin(), scene.media.end(), [](const Medium& m) {
-        return !m.isVacuumLike() && m.channelMax()[kScatteringChannel] > 0 && m.scatteringAt(550) > 0;
+    // Something must scatter at a line for the field to hold any light.
+    const bool scatters = std::any_of(scene.media.begin(), scene.media.end(), [&](const Medium& m) {
+        return !m.isVacuumLike() && m.channelMax()[kScatteringChannel] > 0 &&
+               std::any_of(lines.begin(), lines.end(), [&](const BeamLineSide& l) { return m.scatteringAt(l.lambdaNm) > 0; });
     });
     if (!scatters) return nullptr;
     for (const BeamLineSide& l : lines)

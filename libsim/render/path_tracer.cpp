@@ -43,11 +43,19 @@ bool anyBeam(const std::vector<Light>& lights) {
 }
 std::vector<double> lineWavelengthsOf(const std::vector<Light>& lights) {
     std::vector<double> lines;
-    for (const Light& l : lights)
-        if (const BeamLight* b = std::get_if<BeamLight>(&l))
-            for (const SpectralLine& line : b->profile->spectrum().spectralLines())
-                if (line.power > 0 && std::find(lines.begin(), lines.end(), line.lambdaNm) == lines.end()) lines.push_back(line.lambdaNm);
+    for (const BeamLine& l : beamLines(lights))
+        if (l.weight > 0 && std::find(lines.begin(), lines.end(), l.lambdaNm) == lines.end()) lines.push_back(l.lambdaNm);
     return lines;
+}
+
+// The branch density at a point with channel values `ch`, per wavelength: Σ_c perMolar[c] ch[c], capped at
+// max(σt, cap) (FluorescencePlan::branchDensityCap): the free flight's and the emission MIS's one rule.
+SampledSpectrum cappedBranchDensity(const std::array<SampledSpectrum, kMaxMediumChannels>& perMolar, const double* ch, int channels,
+                                    const SampledSpectrum& sigmaT, double cap) {
+    SampledSpectrum b(0.0);
+    for (int c = kFirstDyeChannel; c < channels; ++c) b += perMolar[static_cast<size_t>(c)] * ch[c];
+    for (int j = 0; j < kNumWavelengths; ++j) b[j] = std::min(b[j], std::max(sigmaT[j], cap));
+    return b;
 }
 }  // namespace
 
@@ -208,7 +216,6 @@ struct PathTracer::PathState {
     // at the next vertex (sheetScattering).
     bool sheetSampledAtLastVertex = false;
     double lastPhasePdf = 0, lastProposalG = 0, lastFloorExtinction = 0;
-    double lastEmissionExtinction = 0;  // the medium's floor extinction at the vertex, at the hero wavelength (emissionMis)
     // A camera path connected to the computed emission at its last medium vertex (emissionConnection):
     // the branch points of the next free flight weigh the same light by the complement.
     bool emissionSampledAtLastVertex = false;
@@ -341,17 +348,12 @@ double PathTracer::branchDensityAt(int medium, const double* channels, const Sam
     if (!fluorescence_.active(medium)) return 0.0;
     const Medium& med = scene_.media[static_cast<size_t>(medium)];
     const MediumSpectra spec = med.spectra(wl);
-    const std::array<SampledSpectrum, kMaxMediumChannels> perChannel = fluorescence_.branchDensityPerMolar(medium, wl);
+    const MediumSample m = spec.at(channels);
     // Spectral MIS weighs a branch by the mean of its wavelengths' densities (r_e.average()): a hero
     // wavelength where the dye hardly emits still finds the companions' light.
-    const MediumSample m = spec.at(channels);
-    double mean = 0;
-    for (int j = 0; j < kNumWavelengths; ++j) {
-        double b = 0;
-        for (int c = kFirstDyeChannel; c < spec.channels; ++c) b += perChannel[static_cast<size_t>(c)][j] * channels[c];
-        mean += std::min(b, std::max(m.sigmaA[j] + m.sigmaS[j], fluorescence_.branchDensityCap(medium))) / kNumWavelengths;
-    }
-    return mean;
+    return cappedBranchDensity(fluorescence_.branchDensityPerMolar(medium, wl), channels, spec.channels, m.sigmaA + m.sigmaS,
+                               fluorescence_.branchDensityCap(medium))
+        .average();
 }
 
 double PathTracer::floorExtinctionAt(int medium, const SampledWavelengths& wl) const {
@@ -549,8 +551,9 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
     // isotropic), and far from the vertex the connection takes over from free flights, which commit to
     // one direction. Any weights that sum to one keep the estimate unbiased.
     // The connection's share at y (density pc), reached with phase pdf f from a vertex at `distance`.
-    auto emissionMis = [&](double pc, double f, double distance, int yMedium, const double* ch, double extinction) {
-        const double pb = f * branchDensityAt(yMedium, ch, wl) * std::exp(-extinction * distance) / (distance * distance);
+    // `branchDensity`: the free flight's at y, averaged over the wavelengths (branchDensityAt).
+    auto emissionMis = [&](double pc, double f, double distance, double branchDensity, double extinction) {
+        const double pb = f * branchDensity * std::exp(-extinction * distance) / (distance * distance);
         return pc + pb > 0 ? pc / (pc + pb) : 0.0;
     };
     // The unscattered excitation of one beam side (chosen as next-event estimation chooses) at each of its
@@ -617,7 +620,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         if (!source) return source;
         const SampledSpectrum T = transmittance(p, point->p, medium, wl, rng);
         if (!T) return SampledSpectrum(0.0);
-        const double mis = emissionMis(point->pdf, f, distance, pointMedium, ch.data(), medium != kNone ? floorExtinctionAt(medium, wl) : 0.0);
+        const double mis = emissionMis(point->pdf, f, distance, branchDensityAt(pointMedium, ch.data(), wl), medium != kNone ? floorExtinctionAt(medium, wl) : 0.0);
         const SampledSpectrum factor = beta * T * (f * mis / (distance * distance * point->pdf)) / r_u.average();
         for (int i = 0; i < partCount; ++i)
             if (partSources[static_cast<size_t>(i)]) st.labelled.push_back({parts[static_cast<size_t>(i)].key, st.level, factor * partSources[static_cast<size_t>(i)]});
@@ -636,12 +639,9 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         // Camera paths (not sub-paths) at emission wavelengths connect to the computed emission.
         const bool emission = st.imaging && !st.startsAtEmission && st.generation == 0 && !wl.discrete && fluorescence_.active();
         if (emission) Lf += emissionConnection(p, [&](const Vec3& wi) { return phase.pdf(dirIn, wi); });
-        double floorExtinction = 0;  // at the line, in the medium at p: the phase-sampled side's density proxy
-        if (sheets && medium != kNone) {
-            const Medium& med = scene_.media[static_cast<size_t>(medium)];
-            const MediumSample fl = med.spectra(wl).at(med.channelFloor().data());
-            floorExtinction = fl.sigmaA[0] + fl.sigmaS[0];
-        }
+        // In the medium at p, at the hero wavelength: the phase-sampled side's density proxy, for the
+        // sheet-side strategy's MIS and the emission connection's.
+        const double floorExtinction = (sheets || emission) && medium != kNone ? floorExtinctionAt(medium, wl) : 0.0;
         if (sheets) L += sheetScattering(p, proposalG, floorExtinction, [&](const Vec3& wi) { return phase.pdf(dirIn, wi); });
         double phasePdf = 0;
         const Vec3 wi = phase.sample(dirIn, rng.uniform(), rng.uniform(), &phasePdf);
@@ -650,7 +650,6 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         lightSampledAtLastVertex = true;
         st.sheetSampledAtLastVertex = sheets;
         st.lastFloorExtinction = floorExtinction;
-        st.lastEmissionExtinction = emission && medium != kNone ? floorExtinctionAt(medium, wl) : 0.0;
         st.emissionSampledAtLastVertex = emission;
         st.lastPhasePdf = phasePdf;
         st.lastProposalG = proposalG;
@@ -685,11 +684,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             // The same formula applied to a segment's channel maxima bounds it over the segment.
             const double branchCap = dyed ? fluorescence_.branchDensityCap(medium) : 0.0;
             auto branchDensity = [&](const double* ch, const SampledSpectrum& sigmaT) {
-                SampledSpectrum b(0.0);
-                if (!dyed) return b;
-                for (int c = kFirstDyeChannel; c < spec.channels; ++c) b += branchPerChannel[c] * ch[c];
-                for (int j = 0; j < kNumWavelengths; ++j) b[j] = std::min(b[j], std::max(sigmaT[j], branchCap));
-                return b;
+                return dyed ? cappedBranchDensity(branchPerChannel, ch, spec.channels, sigmaT, branchCap) : SampledSpectrum(0.0);
             };
             // The majorant is the sum of two independent processes: tracking (bound sigmaTBar on σt, as
             // in pbrt) and branch points (bound sigmaBBar on the branch density). Each tentative collision
@@ -728,7 +723,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                                 } else if (st.emissionSampledAtLastVertex) {
                                     const double pc = st.imaging->emissionPointPdf(y);
                                     const double mis =
-                                        pc > 0 ? 1 - emissionMis(pc, st.lastPhasePdf, length(y - prevScatter), medium, ch.data(), st.lastEmissionExtinction) : 1.0;
+                                        pc > 0 ? 1 - emissionMis(pc, st.lastPhasePdf, length(y - prevScatter), sigmaB.average(), st.lastFloorExtinction) : 1.0;
                                     startBeam = {st.imaging, mis};
                                 }
                                 std::array<LabelledChannels, kMaxLabelsAtPoint> parts;
