@@ -44,7 +44,7 @@ inline FluorescentRender renderFluorescentLayer(const Scene& scene, int spp, uin
     RenderOptions opt;
     opt.spp = spp;
     opt.seed = seed;
-    opt.sppPerPass = spp;
+    opt.sppPerPass = 0;  // automatic
     opt.threads = threads;
     FluorescentRender r;
     r.summary = render(scene, film, opt);

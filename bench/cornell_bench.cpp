@@ -34,7 +34,7 @@ struct CornellFixture {
         RenderOptions opt;
         opt.spp = spp;
         opt.seed = seed;
-        opt.sppPerPass = spp;
+        opt.sppPerPass = 0;  // automatic
         const RenderSummary s = render(scene, film, opt);
         if (seconds) *seconds = s.seconds;
         return film.image(spp).rgb;

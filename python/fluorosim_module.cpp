@@ -128,7 +128,7 @@ py::dict renderScene(const py::object& sceneArg, std::optional<int> spp, std::op
     opt.spp = spp.value_or(scene.render.spp);
     opt.threads = threads;
     opt.seed = scene.render.seed;
-    opt.sppPerPass = opt.spp;
+    opt.sppPerPass = 0;  // automatic: passes of at least kMinPathsPerPass paths
     opt.validate();
     Film film(scene.camera.width, scene.camera.height, scene.spectral.lambdaMin, scene.spectral.lambdaMax, scene.spectral.binWidth,
               database().cie1931(), FluorescencePlan(scene).active());

@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -29,6 +30,9 @@ namespace fluorosim::app {
 namespace fs = std::filesystem;
 namespace {
 
+// The spp target of a render stopped only by --time: RenderOptions' largest.
+constexpr int kMaxTimedSpp = 1 << 24;
+
 
 struct RenderArgs {
     std::string scene, output;
@@ -39,6 +43,7 @@ struct RenderArgs {
     double checkpointSeconds = 60;
     std::string preview = "total";  // which light the PNG shows: total, elastic or fluorescent
     bool resume = false;            // continue from <output>.checkpoint
+    std::optional<double> time;     // seconds: render passes until they are spent
 };
 
 fs::path checkpointPath(const fs::path& out) { return out.string() + ".checkpoint"; }
@@ -103,6 +108,10 @@ void runRender(const RenderArgs& a) {
     const fs::path out = a.output;
     if (!(a.checkpointSeconds > 0)) throw ConfigError("--checkpoint-seconds: must be positive, got " + std::to_string(a.checkpointSeconds));
     if (cluster::isRoot()) checkWritable(out);  // under MPI only the root writes
+    if (a.time && !(*a.time > 0 && *a.time <= 1e9))
+        throw ConfigError("--time: must lie in (0, 1e9] seconds, got " + messageNumber(*a.time));
+    if (a.time && cluster::size() > 1)
+        throw ConfigError("--time: each rank would stop at its own pass, so the bands would differ in spp; start it without mpirun");
     if (a.resume && cluster::size() > 1)
         throw ConfigError("--resume: continues a render in one process; start it without mpirun");
     const fs::path ckptPath = checkpointPath(out);
@@ -145,9 +154,12 @@ void runRender(const RenderArgs& a) {
         ckpt.seconds = prior.seconds;
         ckpt.stats = prior.stats;
         opt.spp = a.spp.value_or(prior.sppTarget);
+        // A timed render resumed with a new budget continues until it too is spent.
+        if (a.time && !a.spp && opt.spp == prior.sppDone) opt.spp = kMaxTimedSpp;
         std::fprintf(stderr, "fluorosim: resuming %s at %d of %d spp\n", ckptPath.string().c_str(), prior.sppDone, opt.spp);
     } else {
-        opt.spp = a.spp.value_or(scene.render.spp);
+        // With --time alone the budget decides where the render stops, not the scene's spp.
+        opt.spp = a.spp.value_or(a.time ? kMaxTimedSpp : scene.render.spp);
         if (cluster::isRoot() && fs::exists(ckptPath, ec))
             std::fprintf(stderr, "fluorosim: warning: %s is left from an interrupted render; this render replaces it (--resume continues it)\n",
                          ckptPath.string().c_str());
@@ -155,13 +167,20 @@ void runRender(const RenderArgs& a) {
     ckpt.sppTarget = opt.spp;
     opt.threads = a.threads;
     opt.seed = scene.render.seed;
+    opt.timeBudgetSeconds = a.time.value_or(0.0);
     opt.validate();
-    // One sample per pixel per pass: checkpoints stay fresh, and a cancelled pass loses little.
-    opt.sppPerPass = 1;
+    // Automatic passes: one sample per pixel on a large image, so checkpoints stay fresh and a cancelled
+    // pass loses little; more on a small one, so that a pass is not mostly synchronisation.
+    opt.sppPerPass = 0;
     opt.cancel = &installInterruptHandlers();
     if (!cluster::isRoot()) return serveBands(scene, film, opt);  // MPI: render the bands rank 0 hands out
     ProgressBar bar("render");
-    opt.progress = [&](double f) { bar.update(f); };
+    const auto progressStart = std::chrono::steady_clock::now();
+    opt.progress = [&](double f) {
+        // A timed render is as far along as its budget is spent, unless its spp target comes first.
+        if (a.time) f = std::max(f, std::chrono::duration<double>(std::chrono::steady_clock::now() - progressStart).count() / *a.time);
+        bar.update(std::min(f, 1.0));
+    };
     auto lastCheckpoint = std::chrono::steady_clock::now();
     const auto start = lastCheckpoint;
     const RenderCheckpoint base = ckpt;
@@ -188,7 +207,8 @@ void runRender(const RenderArgs& a) {
         throw Interrupted("render interrupted; under mpirun the image is written only once every band is done, so nothing was written");
     if (s.sppCompleted == 0) throw Error("interrupted before the first pass finished; nothing written");
     fs::path png;
-    if (s.cancelled) {
+    if (s.cancelled || s.timeBudgetSpent) {
+        // Stopped by the time budget, the checkpoint stays too: --resume --time continues the render.
         png = save(film, s.sppCompleted, s.stats, &s);
     } else {
         png = writeOutputs(out, film, scene, s.sppCompleted, &s, a.preview);
@@ -212,11 +232,16 @@ void runRender(const RenderArgs& a) {
                                     {"surface_bounces", s.stats.surfaceBounces},
                                     // Null (and branch-process) collisions per real one: the cost of the majorants.
                                     {"null_per_real_collision", nullPerReal(s.stats)},
-                                    {"cancelled", s.cancelled}};
+                                    {"cancelled", s.cancelled},
+                                    {"time_budget_seconds", a.time ? nlohmann::json(*a.time) : nlohmann::json(nullptr)},
+                                    {"time_budget_spent", s.timeBudgetSpent}};
     std::printf("%s\n", summary.dump().c_str());
     std::fflush(stdout);
     std::fprintf(stderr, "fluorosim: wrote %s and %s (%d spp in %.1f s)%s\n", out.string().c_str(), png.string().c_str(),
-                 s.sppCompleted, s.seconds, s.cancelled ? " -- interrupted, finished passes kept" : "");
+                 s.sppCompleted, s.seconds,
+                 s.cancelled         ? " -- interrupted, finished passes kept"
+                 : s.timeBudgetSpent ? " -- the --time budget is spent; --resume continues it"
+                                     : "");
     if (s.nonFiniteSamples > 0)
         std::fprintf(stderr, "fluorosim: warning: %llu non-finite samples were dropped\n", static_cast<unsigned long long>(s.nonFiniteSamples));
     if (s.cancelled) throw Interrupted("render interrupted after " + std::to_string(s.sppCompleted) + " spp (image written)");
@@ -235,6 +260,9 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_option("--fluorescence", args->fluorescence,
                     "Fluorescence model: full (unbiased, default), paper (Abdellah et al.: one event, direct light) or none");
     cmd->add_option("--checkpoint-seconds", args->checkpointSeconds, "Write the image every this many seconds");
+    cmd->add_option("--time", args->time,
+                    "Render passes until this many seconds are spent (finished passes only; the same image as a render of the spp it "
+                    "reached); without --spp the scene's spp does not stop it");
     cmd->add_flag("--resume", args->resume,
                   "Continue an interrupted render from OUTPUT.checkpoint (same scene, seed and model; --spp may raise the target)");
     cmd->add_option("--preview", args->preview,

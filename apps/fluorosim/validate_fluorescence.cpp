@@ -131,6 +131,7 @@ void runEmission(const EmissionArgs& a) {
     opt.spp = a.spp;
     opt.threads = a.threads;
     opt.seed = a.seed;
+    opt.sppPerPass = 0;  // automatic: 32x32 pixels would otherwise give passes of 1024 paths
     ProgressBar bar("validate emission");
     opt.progress = [&](double f) { bar.update(f); };
     const RenderSummary s = render(scene, film, opt);

@@ -48,31 +48,25 @@ int Film::binCount(double lambdaMin, double lambdaMax, double binWidth) {
 double Film::estimatedBytes(int width, int height, int bins) {
     const double pixels = static_cast<double>(width) * static_cast<double>(height);
     const double perPixelAndChannel = 2 * 8    // elastic and fluorescent sums, double
-                                      + 2 * 8  // the staged copy of a pass's rows
                                       + 3 * 4;  // total, elastic and fluorescent layers as floats in the EXR image
-    return pixels * ((3.0 + bins) * perPixelAndChannel + 2 * 4);  // + non-finite counts (film and staged)
+    // + non-finite counts, and a pass's staged samples (about 140 bytes per pixel and sample of the pass).
+    return pixels * ((3.0 + bins) * perPixelAndChannel + 4 + 160);
 }
 
-void Film::addSample(int x, int y, const PathRadiance& L, const SampledWavelengths& wl) {
+void Film::addSample(int x, int y, const PathRadiance& L, const SampledWavelengths& wl) { addSpectra(x, y, L.elastic, L.fluorescent, wl); }
+
+void Film::addSpectra(int x, int y, const SampledSpectrum& elastic, const SampledSpectrum& fluorescent, const SampledWavelengths& wl) {
     const size_t pixel = static_cast<size_t>(y) * static_cast<size_t>(width_) + static_cast<size_t>(x);
-    if (!L.elastic.isFinite() || !L.fluorescent.isFinite()) {
+    if (!elastic.isFinite() || !fluorescent.isFinite()) {
         ++nonFinite_[pixel];
         return;
     }
     const size_t bins = static_cast<size_t>(binCount());
-    for (int c = 0; c < 2; ++c)
-        accumulate(&xyz_[c][3 * pixel], &spectral_[c][pixel * bins], c == kElastic ? L.elastic : L.fluorescent, wl);
+    for (int c = 0; c < 2; ++c) accumulate(&xyz_[c][3 * pixel], &spectral_[c][pixel * bins], c == kElastic ? elastic : fluorescent, wl);
 }
 
 void Film::addSample(Row& row, int x, const PathRadiance& L, const SampledWavelengths& wl) const {
-    const size_t px = static_cast<size_t>(x);
-    if (!L.elastic.isFinite() || !L.fluorescent.isFinite()) {
-        ++row.nonFinite[px];
-        return;
-    }
-    const size_t bins = static_cast<size_t>(binCount());
-    for (int c = 0; c < 2; ++c)
-        accumulate(&row.xyz[c][3 * px], &row.spectral[c][px * bins], c == kElastic ? L.elastic : L.fluorescent, wl);
+    row.samples.push_back(Row::Sample{x, L.elastic, L.fluorescent, wl});
 }
 
 // One pixel of one component: `xyz` holds its 3 sums, `spectral` its bins.
@@ -94,23 +88,11 @@ void Film::accumulate(double* xyz, double* spectral, const SampledSpectrum& L, c
 Film::Row Film::row(int y) const {
     Row r;
     r.y = y;
-    const size_t w = static_cast<size_t>(width_), bins = static_cast<size_t>(binCount()), first = static_cast<size_t>(y) * w;
-    for (int c = 0; c < 2; ++c) {
-        r.xyz[c].assign(xyz_[c].begin() + static_cast<std::ptrdiff_t>(3 * first), xyz_[c].begin() + static_cast<std::ptrdiff_t>(3 * (first + w)));
-        r.spectral[c].assign(spectral_[c].begin() + static_cast<std::ptrdiff_t>(bins * first),
-                             spectral_[c].begin() + static_cast<std::ptrdiff_t>(bins * (first + w)));
-    }
-    r.nonFinite.assign(nonFinite_.begin() + static_cast<std::ptrdiff_t>(first), nonFinite_.begin() + static_cast<std::ptrdiff_t>(first + w));
     return r;
 }
 
 void Film::commit(const Row& r) {
-    const size_t w = static_cast<size_t>(width_), bins = static_cast<size_t>(binCount()), first = static_cast<size_t>(r.y) * w;
-    for (int c = 0; c < 2; ++c) {
-        std::copy(r.xyz[c].begin(), r.xyz[c].end(), xyz_[c].begin() + static_cast<std::ptrdiff_t>(3 * first));
-        std::copy(r.spectral[c].begin(), r.spectral[c].end(), spectral_[c].begin() + static_cast<std::ptrdiff_t>(bins * first));
-    }
-    std::copy(r.nonFinite.begin(), r.nonFinite.end(), nonFinite_.begin() + static_cast<std::ptrdiff_t>(first));
+    for (const Row::Sample& s : r.samples) addSpectra(s.x, r.y, s.elastic, s.fluorescent, s.wl);
 }
 
 namespace {

@@ -40,13 +40,23 @@ public:
     uint64_t nonFiniteSamples() const;
     double meanLuminance(int samplesPerPixel) const;
 
-    // A copy of one row's accumulators. render() adds a pass's samples to copies and commits them when
-    // the whole pass is done, so a pass cancelled half way leaves the film at its last finished pass.
-    // The sums are formed in the same order as with addSample(x, y, ...), so results are bit-identical.
+    // One row's samples of a pass, staged: render() traces a pass into rows and commits them when the
+    // whole pass is done, so a pass cancelled half way leaves the film at its last finished pass.
+    // Committing replays the samples in order, so the sums are bit-identical to addSample(x, y, ...).
+    // A row holds only its pass's samples (not a copy of the row's sums), and reset() keeps its
+    // storage, so a pass costs no allocation or copy in proportion to the width times the bins.
     struct Row {
+        struct Sample {
+            int x;
+            SampledSpectrum elastic, fluorescent;
+            SampledWavelengths wl;
+        };
         int y = -1;
-        std::array<std::vector<double>, 2> xyz, spectral;
-        std::vector<uint32_t> nonFinite;
+        std::vector<Sample> samples;
+        void reset(int row) {
+            y = row;
+            samples.clear();
+        }
     };
     Row row(int y) const;
     void addSample(Row& row, int x, const PathRadiance& L, const SampledWavelengths& wl) const;
@@ -69,6 +79,7 @@ public:
 private:
     enum Component { kElastic = 0, kFluorescent = 1 };
     void accumulate(double* xyz, double* spectral, const SampledSpectrum& L, const SampledWavelengths& wl) const;
+    void addSpectra(int x, int y, const SampledSpectrum& elastic, const SampledSpectrum& fluorescent, const SampledWavelengths& wl);
 
     int width_, height_;
     double lambdaMin_, lambdaMax_, binWidth_;

@@ -7,6 +7,8 @@
 #include <vector>
 
 #include "core/errors.h"
+#include "core/memory_cap.h"
+#include "core/message.h"
 #include "core/parallel.h"
 
 namespace fluorosim {
@@ -14,7 +16,9 @@ namespace fluorosim {
 void RenderOptions::validate() const {
     if (spp <= 0 || spp > (1 << 24)) throw ConfigError("--spp: must lie in [1, 16777216], got " + std::to_string(spp));
     checkThreadCount(threads, "--threads");
-    if (sppPerPass <= 0) throw ConfigError("spp per pass must be positive, got " + std::to_string(sppPerPass));
+    if (!(timeBudgetSeconds >= 0) || timeBudgetSeconds > 1e9)
+        throw ConfigError("--time: must lie in (0, 1e9] seconds, got " + messageNumber(timeBudgetSeconds));
+    if (sppPerPass < 0) throw ConfigError("spp per pass must be 0 (automatic) or positive, got " + std::to_string(sppPerPass));
     if (firstSample < 0 || firstSample > spp)
         throw ConfigError("--spp: must be at least the " + std::to_string(firstSample) + " samples per pixel already rendered, got " +
                           std::to_string(spp));
@@ -25,6 +29,12 @@ Ray cameraRay(const Camera& camera, int x, int y, double u1, double u2) {
     const double sx = (2.0 * (x + u1) / camera.width - 1.0) * camera.tanHalfFovY * aspect;
     const double sy = (1.0 - 2.0 * (y + u2) / camera.height) * camera.tanHalfFovY;
     return Ray{camera.position, normalize(camera.frame.n + camera.frame.s * sx + camera.frame.t * sy)};
+}
+
+int samplesPerPass(const RenderOptions& options, int width, int rows) {
+    if (options.sppPerPass > 0) return options.sppPerPass;
+    const double pixels = static_cast<double>(width) * rows;
+    return static_cast<int>(std::clamp(std::ceil(kMinPathsPerPass / pixels), 1.0, static_cast<double>(options.spp)));
 }
 
 RenderSummary render(const Scene& scene, Film& film, const RenderOptions& options) {
@@ -44,22 +54,28 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
     std::mutex progressMutex;
     const double totalWork = static_cast<double>(options.spp - options.firstSample) * rows;
     double workDone = 0;
+    const int perPass = samplesPerPass(options, cam.width, rows);
+    requireMemory(static_cast<double>(cam.width) * rows * perPass * sizeof(Film::Row::Sample),
+                  "a render pass of " + std::to_string(perPass) + " samples per pixel on " + std::to_string(cam.width) + "x" + std::to_string(rows) +
+                      " pixels (its samples are staged until the pass ends)");
+    ThreadArena threads(options.threads);
+    // Each row of a pass is traced into its staged samples and committed only when every row is done.
+    std::vector<Film::Row> staged(static_cast<size_t>(rows));
     auto cancelled = [&] { return options.cancel && options.cancel->load(std::memory_order_relaxed); };
 
-    for (int passStart = options.firstSample; passStart < options.spp; passStart += options.sppPerPass) {
+    for (int passStart = options.firstSample; passStart < options.spp; passStart += perPass) {
         if (cancelled()) {
             summary.cancelled = true;
             break;
         }
-        const int passEnd = std::min(options.spp, passStart + options.sppPerPass);
-        // Each row of the pass is traced into a copy and committed only when every row is done.
-        std::vector<Film::Row> staged(static_cast<size_t>(rows));
+        const int passEnd = std::min(options.spp, passStart + perPass);
         std::vector<PathStats> stagedStats(static_cast<size_t>(rows));
         std::vector<char> done(static_cast<size_t>(rows), 0);
-        parallelFor(static_cast<size_t>(rows), options.threads, [&](size_t row) {
+        threads.parallelFor(static_cast<size_t>(rows), [&](size_t row) {
             if (cancelled()) return;
             const int y = options.firstRow + static_cast<int>(row);
-            Film::Row r = film.row(static_cast<int>(row));
+            Film::Row& r = staged[row];
+            r.reset(static_cast<int>(row));
             PathStats stats = rowStats[row];
             for (int x = 0; x < cam.width; ++x) {
                 if (cancelled()) return;
@@ -71,7 +87,6 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
                     film.addSample(r, x, tracer.radiance(ray, cam.medium, wl, rng, stats), wl);
                 }
             }
-            staged[row] = std::move(r);
             stagedStats[row] = stats;
             done[row] = 1;
             if (options.progress) {
@@ -91,6 +106,11 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
             PathStats stats;
             for (const PathStats& st : rowStats) stats.add(st);
             options.passFinished(film, passEnd, stats);
+        }
+        const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        if (options.timeBudgetSeconds > 0 && passEnd < options.spp && elapsed >= options.timeBudgetSeconds) {
+            summary.timeBudgetSpent = true;
+            break;
         }
     }
     for (const PathStats& s : rowStats) summary.stats.add(s);

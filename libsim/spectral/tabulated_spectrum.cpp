@@ -25,13 +25,28 @@ TabulatedSpectrum::TabulatedSpectrum(std::vector<double> lambdaNm, std::vector<d
             throw ConfigError(source + ": negative or non-finite value " + std::to_string(values_[i]) + " at " +
                               std::to_string(lambda_[i]) + " nm (row " + std::to_string(i + 1) + ")");
     }
+    // A uniform grid of as many cells as samples, each holding the sample interval its start lies in:
+    // a look-up starts there instead of a binary search (the path tracer evaluates spectra per vertex).
+    const size_t cells = lambda_.size();
+    cellsPerNm_ = static_cast<double>(cells) / (lambda_.back() - lambda_.front());
+    cellStart_.resize(cells);
+    size_t i = 0;
+    for (size_t k = 0; k < cells; ++k) {
+        const double start = lambda_.front() + static_cast<double>(k) / cellsPerNm_;
+        while (i + 2 < lambda_.size() && lambda_[i + 1] <= start) ++i;
+        cellStart_[k] = static_cast<uint32_t>(i);
+    }
 }
 
 double TabulatedSpectrum::operator()(double l) const {
     if (lambda_.empty() || l < lambda_.front() || l > lambda_.back()) return 0.0;
-    const auto it = std::upper_bound(lambda_.begin(), lambda_.end(), l);
-    if (it == lambda_.end()) return values_.back();
-    const size_t i = static_cast<size_t>(it - lambda_.begin()) - 1;
+    if (l == lambda_.back()) return values_.back();
+    // The interval with lambda_[i] <= l < lambda_[i + 1], as a binary search would find it; the walks
+    // absorb the cell index's rounding.
+    const size_t k = std::min(cellStart_.size() - 1, static_cast<size_t>((l - lambda_.front()) * cellsPerNm_));
+    size_t i = cellStart_[k];
+    while (i > 0 && lambda_[i] > l) --i;
+    while (lambda_[i + 1] <= l) ++i;
     const double t = (l - lambda_[i]) / (lambda_[i + 1] - lambda_[i]);
     return (1 - t) * values_[i] + t * values_[i + 1];
 }

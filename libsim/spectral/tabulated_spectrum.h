@@ -1,6 +1,7 @@
 #pragma once
 // A piecewise-linear spectrum on strictly increasing wavelengths (nm), zero outside its range.
 #include <string>
+#include <cstdint>
 #include <vector>
 
 namespace fluorosim {
@@ -30,6 +31,8 @@ public:
 
 private:
     std::vector<double> lambda_, values_;
+    std::vector<uint32_t> cellStart_;  // look-up acceleration: see the constructor
+    double cellsPerNm_ = 0;
 };
 
 }  // namespace fluorosim

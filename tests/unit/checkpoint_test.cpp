@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <cmath>
 #include <fstream>
 #include <sstream>
 
@@ -83,6 +84,58 @@ TEST(RenderInterruption, ResumedRenderEqualsUninterruptedBitForBit) {
     const auto pixels = static_cast<uint64_t>(scene.camera.width * scene.camera.height);
     EXPECT_EQ(first.stats.paths + second.stats.paths, 7 * pixels);
     EXPECT_EQ(state(film), uninterrupted(scene, 7));
+}
+
+// A time budget stops at the first pass that ends after it: the film is exactly a render of that spp.
+TEST(RenderTimeBudget, StopsAfterAFinishedPassWithTheImageOfItsSpp) {
+    const Scene scene = ballScene();
+    Film film = makeFilm(scene);
+    RenderOptions o = options(1000);
+    o.timeBudgetSeconds = 1e-9;  // spent before the first pass ends
+    const RenderSummary s = render(scene, film, o);
+    EXPECT_TRUE(s.timeBudgetSpent);
+    EXPECT_FALSE(s.cancelled);
+    EXPECT_EQ(s.sppCompleted, 1);
+    EXPECT_EQ(state(film), uninterrupted(scene, 1));
+
+    // A budget that outlasts the target changes nothing.
+    Film full = makeFilm(scene);
+    RenderOptions generous = options(3);
+    generous.timeBudgetSeconds = 1e6;
+    const RenderSummary f = render(scene, full, generous);
+    EXPECT_FALSE(f.timeBudgetSpent);
+    EXPECT_EQ(f.sppCompleted, 3);
+    EXPECT_EQ(state(full), uninterrupted(scene, 3));
+
+    for (double bad : {-1.0, 2e9, std::nan("")}) {
+        RenderOptions b = options(2);
+        b.timeBudgetSeconds = bad;
+        EXPECT_THROW(render(scene, full, b), ConfigError) << bad;
+    }
+}
+
+// Automatic passes hold at least kMinPathsPerPass paths (a small image takes many samples per pixel
+// a pass) and give the same image as passes of one sample.
+TEST(RenderPasses, AutomaticPassesAreLongOnSmallImagesAndChangeNoBit) {
+    RenderOptions o = options(100000);
+    o.sppPerPass = 0;
+    EXPECT_EQ(samplesPerPass(o, 32, 32), 64);
+    EXPECT_EQ(samplesPerPass(o, 256, 256), 1);
+    EXPECT_EQ(samplesPerPass(o, 300, 7), 32);  // ceil(65536 / 2100)
+    o.spp = 10;
+    EXPECT_EQ(samplesPerPass(o, 32, 32), 10);  // never more than the render's spp
+    o.sppPerPass = 3;
+    EXPECT_EQ(samplesPerPass(o, 32, 32), 3);
+
+    const Scene scene = ballScene();
+    Film film = makeFilm(scene);
+    RenderOptions automatic = options(9);
+    automatic.sppPerPass = 0;
+    int passes = 0;
+    automatic.passFinished = [&](const Film&, int, const PathStats&) { ++passes; };
+    render(scene, film, automatic);
+    EXPECT_EQ(passes, 1);
+    EXPECT_EQ(state(film), uninterrupted(scene, 9));
 }
 
 TEST(RenderInterruption, ResumeBeyondTheTargetIsRefused) {

@@ -216,6 +216,35 @@ TEST(Cli, InterruptedRenderKeepsFinishedPassesAndResumesToTheSameImage) {
     EXPECT_EQ(json::parse(resumed.out).at("scattering_events"), ref.at("scattering_events"));
 }
 
+// --time renders finished passes until the budget is spent: the image is that of a render of the spp
+// it reached, and the checkpoint stays so that --resume continues it.
+TEST(Cli, TimedRenderStopsAtAFinishedPassAndEqualsARenderOfItsSpp) {
+    const TempDir dir;
+    const auto scene = dir.write("scene.json", sceneJson(24, 16, 4));  // the scene's spp does not stop a timed render
+    const fs::path out = dir.path() / "timed.exr";
+    const auto timed = runCli(dir, {"render", scene.string(), "-o", out.string(), "--time", "0.5", "--threads", "2"});
+    ASSERT_EQ(timed.exitCode, 0) << timed.err;
+    const json summary = json::parse(timed.out);
+    EXPECT_TRUE(summary.at("time_budget_spent").get<bool>());
+    EXPECT_EQ(summary.at("time_budget_seconds").get<double>(), 0.5);
+    EXPECT_FALSE(summary.at("cancelled").get<bool>());
+    const int done = summary.at("spp").get<int>();
+    EXPECT_GT(done, 4);
+    EXPECT_EQ(readExr(out.string()).attributes.at("fluorosim.spp"), std::to_string(done));
+    EXPECT_TRUE(fs::exists(out.string() + ".checkpoint"));
+    EXPECT_TRUE(contains(timed.err, "--resume continues it")) << timed.err;
+    const fs::path reference = dir.path() / "reference.exr";
+    const auto refRun = runCli(dir, {"render", scene.string(), "-o", reference.string(), "--spp", std::to_string(done), "--threads", "1"});
+    ASSERT_EQ(refRun.exitCode, 0) << refRun.err;
+    EXPECT_TRUE(sameChannels(out, reference));
+
+    for (const char* bad : {"0", "-1", "nan", "2e9"}) {
+        const auto r = runCli(dir, {"render", scene.string(), "-o", (dir.path() / "bad.exr").string(), "--time", bad});
+        EXPECT_EQ(r.exitCode, 2) << bad;
+        expectOneLineError(r, {"--time", "must lie in (0, 1e9] seconds"});
+    }
+}
+
 TEST(Cli, InterruptBySigintIsHandledLikeSigterm) {
     const TempDir dir;
     const auto scene = dir.write("scene.json", sceneJson(24, 16, 1000000));

@@ -1,4 +1,4 @@
-// Film: spectral binning of samples, and the row copies render() stages a pass in.
+// Film: spectral binning of samples, and the rows render() stages a pass in.
 #include <gtest/gtest.h>
 
 #include <sstream>

@@ -3,6 +3,7 @@
 
 #include <atomic>
 #include <string>
+#include <vector>
 
 #include "core/errors.h"
 #include "core/parallel.h"
@@ -24,6 +25,17 @@ TEST(ParallelFor, RefusesThreadCountsOutsideTheRange) {
     parallelFor(4, kMaxThreads, [&](size_t) { ++calls; });
     parallelFor(4, 0, [&](size_t) { ++calls; });
     EXPECT_EQ(calls.load(), 8);
+}
+
+// The arena a render keeps across its passes runs every item of every loop once.
+TEST(ThreadArena, RunsEveryItemOfManyLoops) {
+    for (int threads : {1, 2, 0}) {
+        ThreadArena arena(threads);
+        std::vector<std::atomic<int>> hits(37);
+        for (int loop = 0; loop < 200; ++loop) arena.parallelFor(hits.size(), [&](size_t i) { ++hits[i]; });
+        for (const auto& h : hits) EXPECT_EQ(h.load(), 200) << threads;
+    }
+    EXPECT_THROW(ThreadArena(65537), ConfigError);
 }
 
 TEST(ParallelFor, CheckNamesTheOption) {

@@ -85,6 +85,26 @@ TEST(TabulatedSpectrum, IntegralOfManyUnevenKnots) {
     EXPECT_NEAR(f.integral(), static_cast<double>(expected), 1e-12 * static_cast<double>(expected));
 }
 
+// The look-up starts from a cell grid instead of a binary search; it must pick the same interval
+// (so the same bits) at every knot, just beside it and between knots, on clustered and wide tables.
+TEST(TabulatedSpectrum, CellLookUpEqualsABinarySearchBitForBit) {
+    const std::vector<double> l = {380, 380.001, 380.002, 381.5, 390, 402.25, 455, 455.5, 455.50001, 700, 1000};
+    const std::vector<double> v = {0.3, 2.0, 0.7, 0.0, 1.25, 4.0, 0.5, 0.9, 0.2, 0.1, 3.0};
+    const TabulatedSpectrum f(l, v, "clustered");
+    auto searched = [&](double x) {
+        if (x < l.front() || x > l.back()) return 0.0;
+        const auto it = std::upper_bound(l.begin(), l.end(), x);
+        if (it == l.end()) return v.back();
+        const size_t i = static_cast<size_t>(it - l.begin()) - 1;
+        const double t = (x - l[i]) / (l[i + 1] - l[i]);
+        return (1 - t) * v[i] + t * v[i + 1];
+    };
+    std::vector<double> xs;
+    for (double k : l) xs.insert(xs.end(), {k, std::nextafter(k, 0.0), std::nextafter(k, 2000.0)});
+    for (int i = 0; i <= 20000; ++i) xs.push_back(370 + 640.0 * i / 20000);
+    for (double x : xs) ASSERT_EQ(f(x), searched(x)) << "at " << x << " nm";
+}
+
 // Exact reference: linear interpolation in long double and, on each interval of the merged knot
 // set where both factors are linear, the closed form  h/6 (2 f0 g0 + f0 g1 + f1 g0 + 2 f1 g1).
 long double lerp(const std::vector<double>& l, const std::vector<double>& v, long double x) {
