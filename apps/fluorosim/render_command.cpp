@@ -40,6 +40,7 @@ struct RenderArgs {
     int threads = 0;
     std::optional<uint64_t> seed;
     std::string fluorescence;
+    std::string integrator;         // overrides the scene's render.integrator
     double checkpointSeconds = 60;
     std::string preview = "total";  // which light the PNG shows: total, elastic or fluorescent
     bool resume = false;            // continue from <output>.checkpoint
@@ -129,6 +130,11 @@ void runRender(const RenderArgs& a) {
         if (!model) throw ConfigError("--fluorescence: expected full, paper or none, got \"" + excerpt(a.fluorescence) + "\"");
         scene.render.fluorescence = *model;
     }
+    if (!a.integrator.empty()) {
+        const auto integrator = integratorFromName(a.integrator);
+        if (!integrator) throw ConfigError("--integrator: expected path or mnee, got \"" + excerpt(a.integrator) + "\"");
+        scene.render.integrator = *integrator;
+    }
     const int bins = Film::binCount(scene.spectral.lambdaMin, scene.spectral.lambdaMax, scene.spectral.binWidth);
     requireMemory(Film::estimatedBytes(scene.camera.width, scene.camera.height, bins),
                   a.scene + ": /camera/resolution " + std::to_string(scene.camera.width) + "x" + std::to_string(scene.camera.height) +
@@ -139,6 +145,7 @@ void runRender(const RenderArgs& a) {
     ckpt.sceneHash = sceneHash(a.scene);
     ckpt.seed = scene.render.seed;
     ckpt.fluorescence = fluorescenceModelName(scene.render.fluorescence);
+    ckpt.integrator = integratorName(scene.render.integrator);
     RenderOptions opt;
     if (a.resume) {
         const RenderCheckpoint prior = readCheckpoint(ckptPath.string(), film);
@@ -150,6 +157,9 @@ void runRender(const RenderArgs& a) {
         if (prior.fluorescence != ckpt.fluorescence)
             throw ConfigError("--fluorescence: " + ckptPath.string() + " was rendered with \"" + prior.fluorescence + "\", got \"" +
                               ckpt.fluorescence + "\"");
+        if (prior.integrator != ckpt.integrator)
+            throw ConfigError("--integrator: " + ckptPath.string() + " was rendered with \"" + prior.integrator + "\", got \"" + ckpt.integrator +
+                              "\"");
         opt.firstSample = prior.sppDone;
         ckpt.seconds = prior.seconds;
         ckpt.stats = prior.stats;
@@ -226,6 +236,7 @@ void runRender(const RenderArgs& a) {
                                     {"non_finite_samples", s.nonFiniteSamples},
                                     {"truncated_paths", s.stats.truncated},
                                     {"fluorescence", fluorescenceModelName(scene.render.fluorescence)},
+                                    {"integrator", integratorName(scene.render.integrator)},
                                     {"fluorescence_branches", s.stats.fluorescenceBranches},
                                     {"tentative_collisions", s.stats.tentativeCollisions},
                                     {"scattering_events", s.stats.scatteringEvents},
@@ -259,6 +270,9 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_option("--seed", args->seed, "Random seed (default: the scene's)")->check(nonNegativeInteger());
     cmd->add_option("--fluorescence", args->fluorescence,
                     "Fluorescence model: full (unbiased, default), paper (Abdellah et al.: one event, direct light) or none");
+    cmd->add_option("--integrator", args->integrator,
+                    "path (the reference: straight shadow rays and phase sampling) or mnee (adds manifold next-event estimation "
+                    "through glass spheres; default: the scene's render.integrator)");
     cmd->add_option("--checkpoint-seconds", args->checkpointSeconds, "Write the image every this many seconds");
     cmd->add_option("--time", args->time,
                     "Render passes until this many seconds are spent (finished passes only; the same image as a render of the spp it "

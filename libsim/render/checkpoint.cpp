@@ -15,7 +15,7 @@ namespace fluorosim {
 namespace {
 
 constexpr char kMagic[16] = "FLUOROSIM-CKPT";
-constexpr uint32_t kVersion = 1;
+constexpr uint32_t kVersion = 2;
 // PathStats is stored as its bytes; a build whose PathStats differs reads it as another version.
 static_assert(std::is_trivially_copyable_v<PathStats>);
 
@@ -78,6 +78,8 @@ void writeCheckpoint(const std::string& path, const RenderCheckpoint& c, const F
         put(body, c.seed);
         put(body, static_cast<uint32_t>(c.fluorescence.size()));
         body.write(c.fluorescence.data(), static_cast<std::streamsize>(c.fluorescence.size()));
+        put(body, static_cast<uint32_t>(c.integrator.size()));
+        body.write(c.integrator.data(), static_cast<std::streamsize>(c.integrator.size()));
         put(body, static_cast<int32_t>(c.sppDone));
         put(body, static_cast<int32_t>(c.sppTarget));
         put(body, c.seconds);
@@ -127,6 +129,10 @@ RenderCheckpoint readCheckpoint(const std::string& path, Film& film) {
     if (nameLength > 64) throw IoError(path + ": checkpoint is damaged (model name)");
     c.fluorescence.resize(nameLength);
     in.read(c.fluorescence.data(), nameLength);
+    const auto integratorLength = get<uint32_t>(in, path);
+    if (integratorLength > 64) throw IoError(path + ": checkpoint is damaged (integrator name)");
+    c.integrator.resize(integratorLength);
+    in.read(c.integrator.data(), integratorLength);
     c.sppDone = get<int32_t>(in, path);
     c.sppTarget = get<int32_t>(in, path);
     c.seconds = get<double>(in, path);

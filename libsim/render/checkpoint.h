@@ -19,6 +19,7 @@ struct RenderCheckpoint {
     uint64_t sceneHash = 0;       // of the scene file's text (fnv1a64)
     uint64_t seed = 0;
     std::string fluorescence;     // the model's name
+    std::string integrator;       // integratorName()
     int sppDone = 0;              // samples per pixel in the film
     int sppTarget = 0;            // what the interrupted run was asked for
     double seconds = 0;           // rendering time so far

@@ -9,6 +9,7 @@
 #include "core/sampling.h"
 #include "media/free_flight.h"
 #include "render/beam_core.h"
+#include "render/specular_chain.h"
 #include "render/straight_line.h"
 
 namespace fluorosim {
@@ -48,6 +49,54 @@ std::vector<double> lineWavelengthsOf(const std::vector<Light>& lights) {
     return lines;
 }
 
+// The stacks of concentric spheres whose every surface is a smooth dielectric (or an index-matched
+// interface) between consistently nested media: the chains manifold next-event estimation follows.
+std::vector<SphericalShells> sphericalShellsOf(const Scene& scene) {
+    struct Sphere {
+        Vec3 c;
+        double r;
+        uint32_t shape;
+    };
+    std::vector<Sphere> spheres;
+    for (uint32_t i = 0; i < scene.shapes.size(); ++i) {
+        const ShapeInfo& s = scene.shapes[i];
+        if (!scene.geometry.isSphere(i) || !s.isInterface || s.insideMedium == s.outsideMedium) continue;
+        if (s.material != kNone) {
+            const Material& m = *scene.materials[static_cast<size_t>(s.material)];
+            if (!m.isSpecular() || !m.isTransmissive()) continue;
+        }
+        spheres.push_back({scene.geometry.sphereCenter(i), scene.geometry.sphereRadius(i), i});
+    }
+    std::sort(spheres.begin(), spheres.end(), [](const Sphere& a, const Sphere& b) { return a.r < b.r; });
+    std::vector<SphericalShells> stacks;
+    std::vector<char> used(spheres.size(), 0);
+    for (size_t i = 0; i < spheres.size(); ++i) {
+        if (used[i]) continue;
+        SphericalShells st;
+        st.center = spheres[i].c;
+        for (size_t j = i; j < spheres.size() && st.count < kMaxShellInterfaces; ++j) {
+            const Vec3 c = spheres[j].c;
+            if (used[j] || !(c.x == st.center.x && c.y == st.center.y && c.z == st.center.z)) continue;
+            const ShapeInfo& s = scene.shapes[spheres[j].shape];
+            if (st.count > 0 && s.insideMedium != st.medium[static_cast<size_t>(st.count)]) break;  // not nested in the stack's order
+            const size_t k = static_cast<size_t>(st.count++);
+            st.radius[k] = spheres[j].r;
+            st.shape[k] = spheres[j].shape;
+            st.medium[k] = s.insideMedium;
+            st.medium[k + 1] = s.outsideMedium;
+            st.ior[k] = scene.ior(s.insideMedium);
+            st.ior[k + 1] = scene.ior(s.outsideMedium);
+            used[j] = 1;
+        }
+        // A stack of index-matched interfaces alone is no obstacle: next-event estimation's straight shadow
+        // rays pass it, and chains would count the same light twice.
+        bool refracting = false;
+        for (int k = 0; k < st.count; ++k) refracting = refracting || scene.shapes[st.shape[static_cast<size_t>(k)]].material != kNone;
+        if (refracting) stacks.push_back(st);
+    }
+    return stacks;
+}
+
 // The branch density at a point with channel values `ch`, per wavelength: Σ_c perMolar[c] ch[c], capped at
 // max(σt, cap) (FluorescencePlan::branchDensityCap): the free flight's and the emission MIS's one rule.
 SampledSpectrum cappedBranchDensity(const std::array<SampledSpectrum, kMaxMediumChannels>& perMolar, const double* ch, int channels,
@@ -61,14 +110,24 @@ SampledSpectrum cappedBranchDensity(const std::array<SampledSpectrum, kMaxMedium
 
 PathTracer::PathTracer(const Scene& scene)
     : scene_(scene), lightList_(scene.lights), lights_(scene, lightList_),
-      fluorescence_(scene, lightList_), hasBeams_(anyBeam(lightList_)), lineWavelengths_(lineWavelengthsOf(lightList_)) {}
+      fluorescence_(scene, lightList_), hasBeams_(anyBeam(lightList_)), lineWavelengths_(lineWavelengthsOf(lightList_)),
+      shells_(scene.render.integrator == Integrator::Mnee ? sphericalShellsOf(scene) : std::vector<SphericalShells>{}) {}
 
 PathTracer::PathTracer(const Scene& scene, std::vector<Light> lights)
     : scene_(scene), lightList_(std::move(lights)), lights_(scene, lightList_),
-      fluorescence_(scene, lightList_), hasBeams_(anyBeam(lightList_)), lineWavelengths_(lineWavelengthsOf(lightList_)) {
+      fluorescence_(scene, lightList_), hasBeams_(anyBeam(lightList_)), lineWavelengths_(lineWavelengthsOf(lightList_)),
+      shells_(scene.render.integrator == Integrator::Mnee ? sphericalShellsOf(scene) : std::vector<SphericalShells>{}) {
     const auto isArea = [](const Light& l) { return std::holds_alternative<AreaLight>(l); };
     if (std::any_of(scene.lights.begin(), scene.lights.end(), isArea) || std::any_of(lightList_.begin(), lightList_.end(), isArea))
         throw ConfigError("a separate light list cannot be used with emitting shapes (their lights are indexed by shape)");
+}
+
+int PathTracer::shellsAround(const Vec3& p, int medium) const {
+    for (size_t i = 0; i < shells_.size(); ++i) {
+        const SphericalShells& s = shells_[i];
+        if (s.medium[0] == medium && length(p - s.center) < s.radius[0]) return static_cast<int>(i);
+    }
+    return -1;
 }
 
 int PathTracer::mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const Vec3& dir, int current) const {
@@ -219,6 +278,12 @@ struct PathTracer::PathState {
     // A camera path connected to the computed emission at its last medium vertex (emissionConnection):
     // the branch points of the next free flight weigh the same light by the complement.
     bool emissionSampledAtLastVertex = false;
+    // Manifold next-event estimation ran at the last medium vertex, inside shells_[chainShells]; the
+    // path has since crossed its first chainNext interfaces outward by refraction and nothing else. An
+    // area light reached at the end of the whole chain is that strategy's, and the path leaves it out.
+    int chainShells = -1, chainNext = 0;
+    Vec3 chainOrigin, chainDirection;  // the vertex and the phase-sampled direction the chain left it in
+    double chainPhasePdf = 0;
     // The image level of the first vertex (CameraPathImaging::imageLevel), and what branches on the
     // first segment contributed, by their own levels.
     int level = 0;
@@ -626,8 +691,79 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             if (partSources[static_cast<size_t>(i)]) st.labelled.push_back({parts[static_cast<size_t>(i)].key, st.level, factor * partSources[static_cast<size_t>(i)]});
         return factor * source;
     };
+    // Manifold next-event estimation from a medium vertex p inside a stack of spherical shells: a point
+    // y on an area light (as next-event estimation picks it), every refracted chain from p to y
+    // (shellPaths), each weighed by the phase value, the media's transmittance along its segments (each
+    // must meet nothing else), the interfaces' Fresnel transmittance and the radiance's n² scaling, over
+    // the chain direction's density p_A(y) · dA/dω. The phase-sampled path that follows the same chain
+    // to the light finds the same light; the balance heuristic weighs the two, this strategy's density
+    // p_A · dA/dω against the phase pdf times the chain's Fresnel transmittance (the probability that
+    // the path refracts at every interface) (chainWeight). Alone, this strategy's weight grows without
+    // bound where dA/dω vanishes: at the caustics the glass focuses inside the liquid.
+    auto chainWeight = [](double pdfChain, double pdfPhase) { return pdfChain + pdfPhase > 0 ? pdfChain / (pdfChain + pdfPhase) : 0.0; };
+    auto shellLight = [&](const Vec3& p, const SphericalShells& sh, auto&& phaseValue) -> SampledSpectrum {
+        const double uLight = rng.uniform(), u1 = rng.uniform(), u2 = rng.uniform();
+        const auto ls = lights_.sample(p, uLight, u1, u2, wl);
+        if (!ls || ls->beam || !(ls->pdf > 0) || !(ls->distance > 0)) return SampledSpectrum(0.0);
+        // Area lights: radiance at y, density p_A(y) over the light's area. Point and spot lights: their
+        // intensity, and the light's solid angle per area across the chain at p, which étendue
+        // conservation gives from the area across the exit ray per solid angle at p:
+        // dω_y/dA⊥_p = (n_p/n_y)² / (dA⊥_y/dω_p) (the n² is in `scale`).
+        const AreaLight* area = nullptr;
+        double pdfArea = ls->pdf;  // a delta light's selection probability
+        if (!ls->delta) {
+            const double cosY = std::abs(dot(ls->n, ls->wi));
+            if (!(cosY > 0)) return SampledSpectrum(0.0);
+            pdfArea = ls->pdf * cosY / sqr(ls->distance);
+            const ShapeInfo& lightShape = scene_.shapes[ls->shape];
+            if (lightShape.areaLight == kNone) return SampledSpectrum(0.0);
+            area = &std::get<AreaLight>(scene_.lights[static_cast<size_t>(lightShape.areaLight)]);
+            // A light dark at these wavelengths (a line light seen by a path at emission wavelengths) needs no chains.
+            if (!lights_.emitted(*area, ls->n, ls->n, wl)) return SampledSpectrum(0.0);
+        } else if (!ls->L) {
+            return SampledSpectrum(0.0);  // dark at these wavelengths, or p outside a spot's cone (checked again per chain)
+        }
+        std::array<ShellPath, 4> roots;
+        const int count = shellPaths(sh, p, ls->p, roots);
+        SampledSpectrum sum(0.0);
+        for (int k = 0; k < count; ++k) {
+            const ShellPath& r = roots[static_cast<size_t>(k)];
+            const SampledSpectrum Le =
+                area ? lights_.emitted(*area, ls->n, -r.exitDirection, wl) : LightSampler::deltaIntensity(*ls->light, -r.exitDirection, wl);
+            if (!Le) continue;
+            const double f = phaseValue(r.direction);
+            if (!(f > 0)) continue;
+            const double dAdw = areaPerSolidAngle(sh, p, r, ls->p, area ? ls->n : r.exitDirection);
+            if (!(dAdw > 0)) continue;
+            TransmittanceEstimate T{SampledSpectrum(1.0), SampledSpectrum(1.0), SampledSpectrum(1.0)};
+            Vec3 from = p, normal;
+            double eps = 0;
+            for (int i = 0; i <= sh.count && T.T; ++i) {
+                const Vec3 to = i < sh.count ? r.points[static_cast<size_t>(i)] : ls->p;
+                const TransmittanceEstimate Ti = estimateTransmittance(from, to, sh.medium[static_cast<size_t>(i)], wl, rng, i > 0 ? &normal : nullptr, eps, false, true);
+                T.T *= Ti.T;
+                T.r_u *= Ti.r_u;
+                T.r_l *= Ti.r_l;
+                normal = normalize(to - sh.center);
+                eps = sphereRayEpsilon(to);
+                from = to;
+            }
+            if (!T.T) continue;
+            const double scale = r.fresnel * sqr(sh.ior[0] / sh.ior[static_cast<size_t>(sh.count)]);
+            const double pdfChain = pdfArea * dAdw;
+            // Nothing else reaches a delta light; an area light is also found by phase sampling.
+            const double weight = area ? chainWeight(pdfChain, f * r.fresnel) : 1.0;
+            const SampledSpectrum rl = T.r_l * r_u * pdfChain;
+            sum += beta * T.T * Le * (f * scale * weight) / rl.average();
+        }
+        return sum;
+    };
     auto scatterInMedium = [&](const Vec3& p, const HenyeyGreenstein& phase, double proposalG, StartBeamWeight startBeam) {
         const Vec3 dirIn = ray.d;
+        st.chainShells = shells_.empty() ? -1 : shellsAround(p, medium);
+        st.chainNext = 0;
+        if (st.chainShells >= 0)
+            L += shellLight(p, shells_[static_cast<size_t>(st.chainShells)], [&](const Vec3& wi) { return phase.pdf(dirIn, wi); });
         L += directLight(
             p, medium, r_u,
             [&](const Vec3& wi) {
@@ -648,6 +784,9 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         r_l = r_u / phasePdf;
         prevScatter = p;
         lightSampledAtLastVertex = true;
+        st.chainOrigin = p;
+        st.chainDirection = wi;
+        st.chainPhasePdf = phasePdf;
         st.sheetSampledAtLastVertex = sheets;
         st.lastFloorExtinction = floorExtinction;
         st.emissionSampledAtLastVertex = emission;
@@ -820,7 +959,17 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             const SampledSpectrum Le = lights_.emitted(light, hit->n, -ray.d, wl) * imagingWeight;
             if (Le) {
                 SampledSpectrum c;
-                if (!lightSampledAtLastVertex) c = beta * Le / r_u.average();
+                if (st.chainShells >= 0 && st.chainNext == shells_[static_cast<size_t>(st.chainShells)].count) {
+                    // The end of a chain that manifold next-event estimation also samples: the complement of its weight.
+                    const SphericalShells& sh = shells_[static_cast<size_t>(st.chainShells)];
+                    const auto path = traceShells(sh, st.chainOrigin, st.chainDirection);
+                    const Vec3 toLight = hit->p - st.chainOrigin;
+                    const double d2 = dot(toLight, toLight);
+                    const double pdfArea = lights_.pdf(st.chainOrigin, hit->shape, hit->p, hit->n) * std::abs(dot(hit->n, toLight)) / (d2 * std::sqrt(d2));
+                    const double pdfChain = path ? pdfArea * areaPerSolidAngle(sh, st.chainOrigin, *path, hit->p, hit->n) : 0.0;
+                    const double pdfPhase = path ? st.chainPhasePdf * path->fresnel : 0.0;
+                    c = beta * Le * (1 - chainWeight(pdfChain, pdfPhase)) / r_u.average();
+                } else if (!lightSampledAtLastVertex) c = beta * Le / r_u.average();
                 else {
                     const double lightPdf = lights_.pdf(prevScatter, hit->shape, hit->p, hit->n);
                     c = beta * Le / (r_u + r_l * lightPdf).average();
@@ -833,8 +982,21 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                 }
             }
         }
+        // The chain of manifold next-event estimation: its next interface, crossed outward by refraction
+        // (or index-matched), advances it; any other surface event ends it.
+        auto followChain = [&](bool transmitted, const Vec3& dir) {
+            if (st.chainShells < 0) return;
+            const SphericalShells& sh = shells_[static_cast<size_t>(st.chainShells)];
+            if (st.chainNext < sh.count && hit->shape == sh.shape[static_cast<size_t>(st.chainNext)] && transmitted && dot(dir, hit->n) > 0)
+                ++st.chainNext;
+            else
+                st.chainShells = -1;
+        };
         if (shape.material == kNone) {
             if (!shape.isInterface) break;  // black emitter or absorber
+            if (st.chainShells >= 0 && st.chainNext < shells_[static_cast<size_t>(st.chainShells)].count &&
+                hit->shape == shells_[static_cast<size_t>(st.chainShells)].shape[static_cast<size_t>(st.chainNext)])
+                followChain(true, ray.d);
             medium = mediumAfterCrossing(shape, hit->n, ray.d, medium);
             ray.o = hit->p;
             st.tMin = leavingTMin(hit->n, ray.d, hit->epsilon);
@@ -870,6 +1032,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         const auto bs = mat.sample(wo, rng.uniform(), rng.uniform(), rng.uniform(), wl, eta, TransportMode::Radiance);
         if (!bs) break;
         const Vec3 wi = frame.toWorld(bs->wi);
+        followChain(bs->transmission && bs->specular, wi);
         beta *= bs->f * std::abs(bs->wi.z) / bs->pdf;
         r_l = r_u / bs->pdf;
         lightSampledAtLastVertex = !bs->specular;

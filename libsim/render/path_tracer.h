@@ -16,6 +16,7 @@
 
 #include "core/rng.h"
 #include "render/fluorescence.h"
+#include "render/specular_chain.h"
 #include "scene/light_sampler.h"
 #include "scene/scene.h"
 
@@ -207,6 +208,10 @@ private:
     FluorescencePlan fluorescence_;
     bool hasBeams_ = false;  // some light is a beam: the sheet-side strategy runs at its lines
     std::vector<double> lineWavelengths_;  // the beams' spectral lines, each once
+    // Integrator::Mnee: the stacks of concentric smooth spherical interfaces, and for a vertex the stack
+    // whose innermost sphere holds it (null if none).
+    std::vector<SphericalShells> shells_;
+    int shellsAround(const Vec3& p, int medium) const;
 };
 
 }  // namespace fluorosim

@@ -1,5 +1,6 @@
 #include "render/specular_chain.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "core/math.h"
@@ -16,9 +17,6 @@ Vec3 exitPoint(const Vec3& c, double r, const Vec3& o, const Vec3& d) {
     const double t = -b + std::sqrt(std::max(0.0, disc));
     return o + d * t;
 }
-
-// Direction w in the plane (e1, e2) at angle a.
-Vec3 inPlane(const Vec3& e1, const Vec3& e2, double a) { return e1 * std::cos(a) + e2 * std::sin(a); }
 
 }  // namespace
 
@@ -44,65 +42,91 @@ std::optional<ShellPath> traceShells(const SphericalShells& s, const Vec3& x, co
 }
 
 int shellPaths(const SphericalShells& s, const Vec3& x, const Vec3& y, std::array<ShellPath, 4>& roots, const ShellRootOptions& options) {
-    // The plane through the centre, x and y; any plane through the line when they are collinear.
-    Vec3 e1 = x - s.center;
-    if (!(length(e1) > 1e-12 * s.radius[0])) e1 = y - s.center;
-    e1 = normalize(e1);
-    Vec3 e2 = (y - s.center) - e1 * dot(y - s.center, e1);
-    if (!(length(e2) > 1e-12 * length(y - s.center))) e2 = Frame::fromNormal(e1).s;
-    e2 = normalize(e2);
-    // Signed miss of the exit ray at y, in the plane: sin of the angle from the exit direction to y;
-    // nullopt where the chain reflects totally or leaves away from y.
-    auto miss = [&](double a, ShellPath* out) -> std::optional<double> {
-        const auto p = traceShells(s, x, inPlane(e1, e2, a));
-        if (!p) return std::nullopt;
-        const Vec3 last = p->points[static_cast<size_t>(s.count - 1)];
-        const Vec3 toY = y - last;
-        const double dist = length(toY);
-        if (!(dist > 0) || dot(p->exitDirection, toY) <= 0) return std::nullopt;
-        if (out) *out = *p;
-        const Vec3 c = cross(p->exitDirection, toY / dist);
-        return dot(c, cross(e1, e2));
-    };
+    // Along a chain through concentric spheres, L = n · (distance of the ray's line from the centre) is
+    // conserved: within a layer the line does not change, and at an interface Snell's law is
+    // n₁ r sin θ₁ = n₂ r sin θ₂. So in the plane of the centre, x and y, the polar angle the chain
+    // turns through from x to radius |y - c| is a sum of arccosines of L: a scalar function of the
+    // direction's angle α at x, whose roots are the chains. Total reflection cuts it off where L exceeds
+    // n_k r_(k-1), which is known in advance.
+    const Vec3 cx = x - s.center, cy = y - s.center;
+    const double rho = length(cx), ry = length(cy);
     int found = 0;
-    // A root of `miss` between a0 and a1, where it changes sign; its path into roots.
-    auto refine = [&](double lo, double hi, double flo) {
-        for (int b = 0; b < options.bisections; ++b) {
-            const double mid = 0.5 * (lo + hi);
-            const std::optional<double> fm = miss(mid, nullptr);
-            if (!fm) return;  // not a bracket of one continuous branch
-            if ((*fm <= 0) == (flo <= 0)) lo = mid, flo = *fm;
-            else hi = mid;
-        }
-        ShellPath p;
-        const std::optional<double> fr = miss(0.5 * (lo + hi), &p);
-        if (fr && std::abs(*fr) < 1e-9 && found < static_cast<int>(roots.size())) roots[static_cast<size_t>(found++)] = p;
-    };
-    // Between a valid direction and one where the chain reflects totally or turns away: the edge of the
-    // valid branch, by bisection, and a root between the valid end and the edge if the sign changes.
-    auto edge = [&](double valid, double fValid, double invalid) {
-        double lo = valid, hi = invalid, fLo = fValid;
-        for (int b = 0; b < options.bisections; ++b) {
-            const double mid = 0.5 * (lo + hi);
-            const std::optional<double> fm = miss(mid, nullptr);
-            if (fm) lo = mid, fLo = *fm;
-            else hi = mid;
-        }
-        if ((fLo <= 0) != (fValid <= 0)) refine(valid, lo, fValid);
-    };
-    const int n = std::max(8, options.brackets);
-    const double step = 2 * kPi / n;
-    double a0 = -kPi;
-    std::optional<double> f0 = miss(a0, nullptr);
-    for (int i = 1; i <= n; ++i) {
-        const double a1 = -kPi + i * step;
-        const std::optional<double> f1 = miss(a1, nullptr);
-        if (f0 && f1 && ((*f0 <= 0) != (*f1 <= 0))) refine(a0, a1, *f0);
-        else if (f0 && !f1) edge(a0, *f0, a1);
-        else if (!f0 && f1) edge(a1, *f1, a0);
-        a0 = a1;
-        f0 = f1;
+    if (!(rho > 1e-12 * s.radius[0])) {  // x at the centre: every chain is radial
+        const auto p = traceShells(s, x, normalize(cy));
+        if (p) roots[static_cast<size_t>(found++)] = *p;
+        return found;
     }
+    const Vec3 e1 = cx / rho;
+    Vec3 e2 = cy - e1 * dot(cy, e1);
+    if (!(length(e2) > 1e-12 * ry)) e2 = Frame::fromNormal(e1).s;
+    e2 = normalize(e2);
+    const double psi = std::atan2(dot(cy, e2), dot(cy, e1));  // y's polar angle, in [0, π]
+    const double n0 = s.ior[0];
+    double lCrit = n0 * rho;  // a direction's L is at most n0 rho
+    for (int k = 1; k <= s.count; ++k) lCrit = std::min(lCrit, s.ior[static_cast<size_t>(k)] * s.radius[static_cast<size_t>(k - 1)]);
+    const double gammaMax = std::asin(std::min(1.0, lCrit / (n0 * rho)));
+    auto acosClamped = [](double v) { return std::acos(std::min(1.0, v)); };
+    // The polar angle turned from x to radius |y - c| by the chain leaving at angle γ in [0, π] from the
+    // outward radius (toward e2), minus ψ, wrapped to (-π, π]; `sign` -1 mirrors it (leaving toward -e2).
+    auto turn = [&](double gamma, double sign) {
+        const double b0 = rho * std::sin(gamma), l = n0 * b0;
+        double phi = gamma - kPi / 2 + acosClamped(b0 / s.radius[0]);
+        for (int k = 1; k <= s.count; ++k) {
+            const double bk = l / s.ior[static_cast<size_t>(k)];
+            const double outer = k < s.count ? s.radius[static_cast<size_t>(k)] : ry;
+            phi += acosClamped(bk / outer) - acosClamped(bk / s.radius[static_cast<size_t>(k - 1)]);
+        }
+        return std::remainder(sign * phi - psi, 2 * kPi);
+    };
+    auto addRoot = [&](double alpha) {
+        const auto p = traceShells(s, x, e1 * std::cos(alpha) + e2 * std::sin(alpha));
+        if (!p || found >= static_cast<int>(roots.size())) return;
+        for (int k = 0; k < found; ++k)  // the radial directions belong to both senses
+            if (length(roots[static_cast<size_t>(k)].direction - p->direction) < 1e-12) return;
+        const Vec3 last = p->points[static_cast<size_t>(s.count - 1)], toY = y - last;
+        // The chain must leave toward y, through it (a check on the arithmetic above).
+        if (dot(p->exitDirection, toY) <= 0 || length(toY - p->exitDirection * dot(toY, p->exitDirection)) > 1e-7 * (ry + s.radius[0])) return;
+        roots[static_cast<size_t>(found++)] = *p;
+    };
+    // A root of turn(·, sign) in [lo, hi], where it changes sign: regula falsi with the Illinois step.
+    auto refine = [&](double lo, double hi, double flo, double fhi, double sign) {
+        int side = 0;
+        double mid = lo;
+        for (int it = 0; it < options.bisections && hi - lo > 1e-15; ++it) {
+            mid = std::clamp((lo * fhi - hi * flo) / (fhi - flo), lo, hi);
+            const double fm = turn(mid, sign);
+            if (fm == 0) break;
+            if ((fm < 0) == (flo < 0)) {
+                lo = mid, flo = fm;
+                if (side == -1) fhi *= 0.5;
+                side = -1;
+            } else {
+                hi = mid, fhi = fm;
+                if (side == 1) flo *= 0.5;
+                side = 1;
+            }
+        }
+        addRoot(sign * mid);
+    };
+    // The valid angles: [0, γmax] (leaving outward) and [π - γmax, π] (inward first), one interval when
+    // total reflection cuts nothing off; each scanned for sign changes that are not wrap-arounds.
+    const int n = std::max(4, options.brackets);
+    std::array<std::array<double, 2>, 2> intervals{{{0.0, gammaMax}, {kPi - gammaMax, kPi}}};
+    const int intervalCount = gammaMax >= kPi / 2 ? 1 : 2;
+    if (intervalCount == 1) intervals[0] = {0.0, kPi};
+    for (double sign : {1.0, -1.0})
+        for (int iv = 0; iv < intervalCount; ++iv) {
+            const auto [from, to] = intervals[static_cast<size_t>(iv)];
+            double g0 = from, f0 = turn(g0, sign);
+            for (int i = 1; i <= n; ++i) {
+                const double g1 = from + (to - from) * i / n, f1 = turn(g1, sign);
+                if (f0 == 0) addRoot(sign * g0);
+                else if ((f0 < 0) != (f1 < 0) && std::abs(f0 - f1) < kPi) refine(g0, g1, f0, f1, sign);
+                g0 = g1;
+                f0 = f1;
+            }
+            if (f0 == 0) addRoot(sign * g0);
+        }
     return found;
 }
 

@@ -3,9 +3,11 @@
 // point x inside the innermost sphere, across every interface once, outward, to a point y outside.
 // These are the chains that next-event estimation from a medium vertex cannot make (a straight shadow
 // ray meets the glass) and that a phase-sampled direction finds only by chance. Such a path lies in the
-// plane through the centre, x and y, so its roots are bracketed on a circle of directions in that plane
-// and refined by bisection (manifold next-event estimation, Hanika et al. 2015, reduced to 1-D by the
-// symmetry). Pure geometry: the path tracer decides what the chains carry (render/path_tracer.cpp).
+// plane through the centre, x and y, and conserves n times its line's distance from the centre, so the
+// angle it turns through is a sum of arccosines of one scalar: its roots are bracketed on a grid of
+// directions in that plane and refined by regula falsi (manifold next-event estimation, Hanika et al.
+// 2015, reduced to 1-D by the symmetry). Pure geometry: the path tracer decides what the chains carry
+// (render/path_tracer.cpp).
 #include <array>
 #include <cstdint>
 #include <optional>
@@ -39,9 +41,9 @@ struct ShellPath {
 std::optional<ShellPath> traceShells(const SphericalShells& s, const Vec3& x, const Vec3& w);
 
 struct ShellRootOptions {
-    int brackets = 64;  // directions on the circle that bracket roots; a root nearer than 2π/brackets to
-                        // another root or to a total-reflection edge may be missed (tested against 4096)
-    int bisections = 52;
+    int brackets = 32;    // directions per interval of valid directions (up to four) that bracket roots; two
+                          // roots within one bracket are missed (tested against 4096)
+    int bisections = 60;  // at most this many steps of regula falsi per root
 };
 
 // Every refracted path from x (inside) to y (outside the outermost interface), at most `maxRoots`.

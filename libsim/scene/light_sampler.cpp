@@ -41,6 +41,15 @@ SampledSpectrum LightSampler::emitted(const AreaLight& light, const Vec3& n, con
     return light.emission.radiance.sampleEmission(wl);
 }
 
+SampledSpectrum LightSampler::deltaIntensity(const Light& light, const Vec3& w, const SampledWavelengths& wl) {
+    const PointLight* pl = std::get_if<PointLight>(&light);
+    const SpotLight* sl = std::get_if<SpotLight>(&light);
+    if (!pl && !sl) return SampledSpectrum(0.0);
+    // The spot's smoothstep falloff towards its cone edge.
+    const double falloff = sl ? smoothStep(dot(w, sl->direction), sl->cosTotalWidth, sl->cosFalloffStart) : 1.0;
+    return (pl ? pl->intensity : sl->intensity).sampleEmission(wl) * (falloff * kMm2PerM2);
+}
+
 std::optional<LightSample> LightSampler::sample(const Vec3& ref, double uLight, double u1, double u2,
                                                 const SampledWavelengths& wl) const {
     const size_t count = lights_.size();
@@ -49,6 +58,7 @@ std::optional<LightSample> LightSampler::sample(const Vec3& ref, double uLight, 
     const double selectPdf = 1.0 / static_cast<double>(count);
     const Light& light = lights_[index];
     LightSample ls;
+    ls.light = &light;
     const PointLight* pl = std::get_if<PointLight>(&light);
     const SpotLight* sl = std::get_if<SpotLight>(&light);
     if (pl || sl) {

@@ -21,6 +21,7 @@ struct LightSample {
     const BeamProfile* beamProfile = nullptr;  // the beam and side sampled, when `beam`
     int side = 0;
     uint32_t shape = 0;
+    const Light* light = nullptr;  // the light sampled
 };
 
 class LightSampler {
@@ -34,6 +35,9 @@ public:
     double pdf(const Vec3& ref, uint32_t shape, const Vec3& pLight, const Vec3& nLight) const;
     // Radiance leaving an area light at a point with normal n towards direction w.
     SampledSpectrum emitted(const AreaLight& light, const Vec3& n, const Vec3& w, const SampledWavelengths& wl) const;
+    // A point or spot light's intensity toward direction w (leaving it), times kMm2PerM2: divided by a
+    // squared distance in mm it is LightSample::L. Zero for other lights.
+    static SampledSpectrum deltaIntensity(const Light& light, const Vec3& w, const SampledWavelengths& wl);
 
 private:
     const Scene& scene_;

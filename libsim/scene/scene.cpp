@@ -11,6 +11,14 @@ std::optional<FluorescenceModel> fluorescenceModelFromName(const std::string& na
     return std::nullopt;
 }
 
+std::optional<Integrator> integratorFromName(const std::string& name) {
+    if (name == "path") return Integrator::Path;
+    if (name == "mnee") return Integrator::Mnee;
+    return std::nullopt;
+}
+
+const char* integratorName(Integrator integrator) { return integrator == Integrator::Mnee ? "mnee" : "path"; }
+
 const Spectrum& emissionSpectrum(const Light& light) {
     return std::visit(
         [](const auto& l) -> const Spectrum& {

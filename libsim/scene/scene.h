@@ -78,8 +78,17 @@ enum class FluorescenceModel { Full, Paper, None };
 std::optional<FluorescenceModel> fluorescenceModelFromName(const std::string& name);
 const char* fluorescenceModelName(FluorescenceModel model);
 
+// How light reaches medium vertices. Path: next-event estimation along straight shadow rays, and
+// phase sampling (the reference). Mnee adds manifold next-event estimation through concentric smooth
+// spherical interfaces (render/specular_chain.h): light behind a glass shell reaches the medium inside.
+enum class Integrator { Path, Mnee };
+// "path" or "mnee"; nullopt for anything else.
+std::optional<Integrator> integratorFromName(const std::string& name);
+const char* integratorName(Integrator integrator);
+
 struct RenderSettings {
     FluorescenceModel fluorescence = FluorescenceModel::Full;
+    Integrator integrator = Integrator::Path;
     int spp = 16;
     int maxDepth = 100000;  // a safety cap; paths that hit it are counted, never silently
     uint64_t seed = 1;

@@ -330,7 +330,12 @@ private:
     }
 
     void loadRender(const Node& n, Scene& scene) {
-        n.allowOnly({"spp", "max_depth", "seed", "fluorescence"});
+        n.allowOnly({"spp", "max_depth", "seed", "fluorescence", "integrator"});
+        if (n.has("integrator")) {
+            const auto integrator = integratorFromName(n.at("integrator").str());
+            if (!integrator) n.at("integrator").fail("expected \"path\" or \"mnee\"");
+            scene.render.integrator = *integrator;
+        }
         if (n.has("fluorescence")) {
             const auto model = fluorescenceModelFromName(n.at("fluorescence").str());
             if (!model) n.at("fluorescence").fail("expected \"full\", \"paper\" or \"none\"");

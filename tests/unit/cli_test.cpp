@@ -245,6 +245,24 @@ TEST(Cli, TimedRenderStopsAtAFinishedPassAndEqualsARenderOfItsSpp) {
     }
 }
 
+TEST(Cli, UnknownIntegratorIsRefusedFromTheCommandLineAndTheScene) {
+    const TempDir dir;
+    const auto scene = dir.write("scene.json", sceneJson(8, 8, 1));
+    const auto r = runCli(dir, {"render", scene.string(), "-o", (dir.path() / "o.exr").string(), "--integrator", "bdpt"});
+    EXPECT_EQ(r.exitCode, 2);
+    expectOneLineError(r, {"--integrator", "path or mnee", "bdpt"});
+    json j = json::parse(readFile(scene));
+    j["render"]["integrator"] = "photons";
+    const auto bad = dir.write("bad.json", j.dump());
+    const auto b = runCli(dir, {"render", bad.string(), "-o", (dir.path() / "o.exr").string()});
+    EXPECT_EQ(b.exitCode, 2);
+    expectOneLineError(b, {bad.string(), "/render/integrator", "mnee"});
+    // A valid choice renders, and the summary says which.
+    const auto ok = runCli(dir, {"render", scene.string(), "-o", (dir.path() / "o.exr").string(), "--integrator", "mnee"});
+    ASSERT_EQ(ok.exitCode, 0) << ok.err;
+    EXPECT_EQ(json::parse(ok.out).at("integrator").get<std::string>(), "mnee");
+}
+
 TEST(Cli, InterruptBySigintIsHandledLikeSigterm) {
     const TempDir dir;
     const auto scene = dir.write("scene.json", sceneJson(24, 16, 1000000));

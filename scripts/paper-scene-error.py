@@ -1,0 +1,74 @@
+#!/usr/bin/python3
+"""Monte Carlo error of the fluorescent layer of a paper scene (samples/fluorescence), per integrator.
+
+Renders the scene twice (seeds 1 and 2) with each integrator and budget given, through the Python
+module, and prints one JSON line per render pair: the relative RMS error of the fluorescent layer
+over the pixels of the dyed liquid, estimated from the two seeds (per-pixel variance of one render =
+half the squared difference), divided by the mean fluorescent value there, and the seconds per render.
+
+The liquid's pixels: those whose central camera ray meets a liquid-filled sphere's glass (the shapes of
+type sphere whose "interior" is a dyed medium, grown to the glass shell around them). Spheres only.
+
+Usage: PYTHONPATH=build/python scripts/paper-scene-error.py SCENE.json path:40 mnee:4 ...
+"""
+import json
+import math
+import sys
+
+import numpy as np
+
+import fluorosim
+
+
+def liquid_mask(scene):
+    cam = scene["camera"]
+    mm = lambda v: np.array([float(str(c).split()[0]) for c in v])
+    pos, look, up = mm(cam["position"]), mm(cam["look_at"]), np.array(cam["up"], float)
+    w, h = cam["resolution"]
+    n = (look - pos) / np.linalg.norm(look - pos)
+    s = np.cross(n, up)
+    s /= np.linalg.norm(s)
+    t = np.cross(s, n)
+    tan = math.tan(math.radians(cam["fov_y_deg"]) / 2)
+    xs = (2 * (np.arange(w) + 0.5) / w - 1) * tan * w / h
+    ys = (1 - 2 * (np.arange(h) + 0.5) / h) * tan
+    d = n[None, None, :] + s[None, None, :] * xs[None, :, None] + t[None, None, :] * ys[:, None, None]
+    d /= np.linalg.norm(d, axis=2, keepdims=True)
+    dyed = {k for k, m in scene["media"].items() if m.get("dyes")}
+    liquids = [sh for sh in scene["shapes"] if sh["type"] == "sphere" and sh.get("interior") in dyed]
+    mask = np.zeros((h, w), bool)
+    for sh in liquids:
+        c = mm(sh["center"])
+        # The glass shell around the liquid: the largest sphere with the same centre.
+        r = max(float(o["radius"].split()[0]) for o in scene["shapes"] if o["type"] == "sphere" and np.allclose(mm(o["center"]), c))
+        oc = pos - c
+        b = d @ oc
+        mask |= (b * b - (oc @ oc - r * r)) > 0
+    return mask
+
+
+def fluorescent(result):
+    return result["rgb_layers"]["fluorescent"].sum(axis=2)
+
+
+def main():
+    path = sys.argv[1]
+    with open(path) as f:
+        scene = json.load(f)
+    mask = liquid_mask(scene)
+    base = path.rsplit("/", 1)[0] if "/" in path else "."
+    for spec in sys.argv[2:]:
+        integrator, spp = spec.split(":")
+        scene["render"]["integrator"] = integrator
+        runs = [fluorosim.render(scene, spp=int(spp), seed=seed, base=base) for seed in (1, 2)]
+        a, b = fluorescent(runs[0])[mask], fluorescent(runs[1])[mask]
+        mean = 0.5 * (a.mean() + b.mean())
+        rms = math.sqrt(np.mean((a - b) ** 2) / 2) / mean if mean > 0 else float("nan")
+        seconds = 0.5 * (runs[0]["seconds"] + runs[1]["seconds"])
+        print(json.dumps({"scene": path, "integrator": integrator, "spp": int(spp), "liquid_pixels": int(mask.sum()),
+                          "mean_fluorescent": float(mean), "relative_rms_error": rms, "seconds_per_render": seconds,
+                          "relative_mse_x_seconds": rms * rms * seconds}), flush=True)
+
+
+if __name__ == "__main__":
+    main()
