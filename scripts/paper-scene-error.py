@@ -8,8 +8,9 @@ half the squared difference), divided by the mean fluorescent value there, and t
 
 The liquid's pixels: those whose central camera ray meets a liquid-filled sphere's glass (the shapes of
 type sphere whose "interior" is a dyed medium, grown to the glass shell around them). Spheres only.
+With --whole: the whole image's total (elastic + fluorescent) RGB instead, for scenes without dyes.
 
-Usage: PYTHONPATH=build/python scripts/paper-scene-error.py SCENE.json path:40 mnee:4 ...
+Usage: PYTHONPATH=build/python scripts/paper-scene-error.py [--whole] SCENE.json path:40 mnee:4 ...
 """
 import json
 import math
@@ -52,21 +53,27 @@ def fluorescent(result):
 
 
 def main():
-    path = sys.argv[1]
+    args = sys.argv[1:]
+    whole = args[0] == "--whole"
+    if whole:
+        args = args[1:]
+    path = args[0]
     with open(path) as f:
         scene = json.load(f)
-    mask = liquid_mask(scene)
+    w, h = scene["camera"]["resolution"]
+    mask = np.ones((h, w), bool) if whole else liquid_mask(scene)
+    layer = (lambda r: r["rgb"].sum(axis=2)) if whole else fluorescent
     base = path.rsplit("/", 1)[0] if "/" in path else "."
-    for spec in sys.argv[2:]:
+    for spec in args[1:]:
         integrator, spp = spec.split(":")
         scene["render"]["integrator"] = integrator
         runs = [fluorosim.render(scene, spp=int(spp), seed=seed, base=base) for seed in (1, 2)]
-        a, b = fluorescent(runs[0])[mask], fluorescent(runs[1])[mask]
+        a, b = layer(runs[0])[mask], layer(runs[1])[mask]
         mean = 0.5 * (a.mean() + b.mean())
         rms = math.sqrt(np.mean((a - b) ** 2) / 2) / mean if mean > 0 else float("nan")
         seconds = 0.5 * (runs[0]["seconds"] + runs[1]["seconds"])
-        print(json.dumps({"scene": path, "integrator": integrator, "spp": int(spp), "liquid_pixels": int(mask.sum()),
-                          "mean_fluorescent": float(mean), "relative_rms_error": rms, "seconds_per_render": seconds,
+        print(json.dumps({"scene": path, "integrator": integrator, "spp": int(spp), "pixels": int(mask.sum()),
+                          "layer": "total" if whole else "fluorescent", "mean": float(mean), "relative_rms_error": rms, "seconds_per_render": seconds,
                           "relative_mse_x_seconds": rms * rms * seconds}), flush=True)
 
 

@@ -67,8 +67,8 @@ int shellPaths(const SphericalShells& s, const Vec3& x, const Vec3& y, std::arra
     const double gammaMax = std::asin(std::min(1.0, lCrit / (n0 * rho)));
     auto acosClamped = [](double v) { return std::acos(std::min(1.0, v)); };
     // The polar angle turned from x to radius |y - c| by the chain leaving at angle γ in [0, π] from the
-    // outward radius (toward e2), minus ψ, wrapped to (-π, π]; `sign` -1 mirrors it (leaving toward -e2).
-    auto turn = [&](double gamma, double sign) {
+    // outward radius (toward e2).
+    auto turned = [&](double gamma) {
         const double b0 = rho * std::sin(gamma), l = n0 * b0;
         double phi = gamma - kPi / 2 + acosClamped(b0 / s.radius[0]);
         for (int k = 1; k <= s.count; ++k) {
@@ -76,8 +76,15 @@ int shellPaths(const SphericalShells& s, const Vec3& x, const Vec3& y, std::arra
             const double outer = k < s.count ? s.radius[static_cast<size_t>(k)] : ry;
             phi += acosClamped(bk / outer) - acosClamped(bk / s.radius[static_cast<size_t>(k - 1)]);
         }
-        return std::remainder(sign * phi - psi, 2 * kPi);
+        return phi;
     };
+    // sign · turned − ψ wrapped to (−π, π]; `sign` −1 mirrors the chain (leaving toward −e2).
+    auto wrapped = [](double v) {
+        while (v > kPi) v -= 2 * kPi;
+        while (v <= -kPi) v += 2 * kPi;
+        return v;
+    };
+    auto turn = [&](double gamma, double sign) { return wrapped(sign * turned(gamma) - psi); };
     auto addRoot = [&](double alpha) {
         const auto p = traceShells(s, x, e1 * std::cos(alpha) + e2 * std::sin(alpha));
         if (!p || found >= static_cast<int>(roots.size())) return;
@@ -114,19 +121,25 @@ int shellPaths(const SphericalShells& s, const Vec3& x, const Vec3& y, std::arra
     std::array<std::array<double, 2>, 2> intervals{{{0.0, gammaMax}, {kPi - gammaMax, kPi}}};
     const int intervalCount = gammaMax >= kPi / 2 ? 1 : 2;
     if (intervalCount == 1) intervals[0] = {0.0, kPi};
-    for (double sign : {1.0, -1.0})
-        for (int iv = 0; iv < intervalCount; ++iv) {
-            const auto [from, to] = intervals[static_cast<size_t>(iv)];
-            double g0 = from, f0 = turn(g0, sign);
-            for (int i = 1; i <= n; ++i) {
-                const double g1 = from + (to - from) * i / n, f1 = turn(g1, sign);
-                if (f0 == 0) addRoot(sign * g0);
-                else if ((f0 < 0) != (f1 < 0) && std::abs(f0 - f1) < kPi) refine(g0, g1, f0, f1, sign);
-                g0 = g1;
-                f0 = f1;
+    std::array<double, 2> g0{}, f0{};
+    for (int iv = 0; iv < intervalCount; ++iv) {
+        const auto [from, to] = intervals[static_cast<size_t>(iv)];
+        // One evaluation of the turned angle serves both senses.
+        double t0 = turned(from);
+        for (int j = 0; j < 2; ++j) g0[j] = from, f0[j] = wrapped((j ? -1 : 1) * t0 - psi);
+        for (int i = 1; i <= n; ++i) {
+            const double g1 = from + (to - from) * i / n, t1 = turned(g1);
+            for (int j = 0; j < 2; ++j) {
+                const double sign = j ? -1.0 : 1.0, f1 = wrapped(sign * t1 - psi);
+                if (f0[j] == 0) addRoot(sign * g0[j]);
+                else if ((f0[j] < 0) != (f1 < 0) && std::abs(f0[j] - f1) < kPi) refine(g0[j], g1, f0[j], f1, sign);
+                g0[j] = g1;
+                f0[j] = f1;
             }
-            if (f0 == 0) addRoot(sign * g0);
         }
+        for (int j = 0; j < 2; ++j)
+            if (f0[j] == 0) addRoot((j ? -1.0 : 1.0) * g0[j]);
+    }
     return found;
 }
 
