@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <string>
 
 #include "support/test_scenes.h"
 
@@ -53,7 +54,17 @@ Scene shellScene(const ShellScene& o) {
     return scene;
 }
 
-double zScore(const Estimate& a, const Estimate& b) { return (a.mean - b.mean) / std::sqrt(sqr(a.stderr_) + sqr(b.stderr_)); }
+std::string text(const Estimate& e) { return std::to_string(e.mean) + " +- " + std::to_string(e.stderr_); }
+
+// Records both estimates (in the test's XML output) and requires them to agree within 4 standard errors.
+void expectAgreement(const char* aName, const Estimate& a, const char* bName, const Estimate& b) {
+    ::testing::Test::RecordProperty(aName, text(a));
+    ::testing::Test::RecordProperty(bName, text(b));
+    ASSERT_GT(a.mean, 0);
+    ASSERT_GT(b.mean, 0);
+    const double z = (a.mean - b.mean) / std::sqrt(sqr(a.stderr_) + sqr(b.stderr_));
+    EXPECT_LT(std::abs(z), 4.0) << aName << " " << text(a) << " against " << bName << " " << text(b);
+}
 
 // Rays from the side into the ball of liquid.
 Estimate seen(const Scene& scene, int paths, uint64_t seed) { return meanRadiance(scene, Vec3(0, -0.3, -5), kNone, Vec3(0, 0, 0), 0.9, paths, seed); }
@@ -63,10 +74,7 @@ TEST(Mnee, AgreesWithThePathTracerBehindGlass) {
     const Estimate mnee = seen(shellScene(o), 40000, 21);
     o.integrator = Integrator::Path;
     const Estimate path = seen(shellScene(o), 400000, 22);
-    RecordProperty("mnee", std::to_string(mnee.mean) + " +- " + std::to_string(mnee.stderr_));
-    RecordProperty("path", std::to_string(path.mean) + " +- " + std::to_string(path.stderr_));
-    ASSERT_GT(mnee.mean, 0);
-    EXPECT_LT(std::abs(zScore(mnee, path)), 4.0) << mnee.mean << " +- " << mnee.stderr_ << " against " << path.mean << " +- " << path.stderr_;
+    expectAgreement("mnee", mnee, "path", path);
     // The point of the method: the same answer at a fraction of the error per path.
     EXPECT_LT(mnee.stderr_ * std::sqrt(40000.0), 0.5 * path.stderr_ * std::sqrt(400000.0));
 }
@@ -78,10 +86,7 @@ TEST(Mnee, IndexOneGlassEqualsPlainNextEventEstimation) {
     o.dielectricSurfaces = false;
     o.integrator = Integrator::Path;
     const Estimate nee = seen(shellScene(o), 40000, 32);
-    RecordProperty("mnee", std::to_string(mnee.mean) + " +- " + std::to_string(mnee.stderr_));
-    RecordProperty("nee", std::to_string(nee.mean) + " +- " + std::to_string(nee.stderr_));
-    ASSERT_GT(nee.mean, 0);
-    EXPECT_LT(std::abs(zScore(mnee, nee)), 4.0) << mnee.mean << " +- " << mnee.stderr_ << " against " << nee.mean << " +- " << nee.stderr_;
+    expectAgreement("mnee", mnee, "nee", nee);
 }
 
 // A point light behind glass: the path tracer cannot reach it at all (its energy is simply missing), and
@@ -97,10 +102,7 @@ TEST(Mnee, PointLightBehindGlassEqualsASmallSphericalLamp) {
     o.integrator = Integrator::Mnee;
     o.lampRadius = o.pointAs;
     const Estimate lamp = seen(shellScene(o), 40000, 43);
-    RecordProperty("point", std::to_string(point.mean) + " +- " + std::to_string(point.stderr_));
-    RecordProperty("lamp", std::to_string(lamp.mean) + " +- " + std::to_string(lamp.stderr_));
-    ASSERT_GT(point.mean, 0);
-    EXPECT_LT(std::abs(zScore(point, lamp)), 4.0) << point.mean << " +- " << point.stderr_ << " against " << lamp.mean << " +- " << lamp.stderr_;
+    expectAgreement("point", point, "lamp", lamp);
 }
 
 }  // namespace
