@@ -6,8 +6,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <string>
 
+#include "support/fluorescent_scenes.h"
 #include "support/test_scenes.h"
 
 namespace fluorosim {
@@ -22,13 +24,15 @@ struct ShellScene {
     double liquidIor = 1.33, glassIor = 1.5;
     double lampRadius = 0.3;  // 0: a point light of the intensity a lamp of radius `pointAs` would have
     double pointAs = 0.02;
+    bool dyed = false;  // AF488 at 20 µM in the liquid, and a lamp of one line at 495 nm
     bool dielectricSurfaces = true;  // false: index-matched interfaces without a material
     Integrator integrator = Integrator::Mnee;
 };
 
 Scene shellScene(const ShellScene& o) {
     Scene scene;
-    const int liquid = addMedium(scene, "liquid", 0.3, 2.0, 0.3, o.liquidIor);
+    const int liquid = o.dyed ? testing::addDyedMedium(scene, "liquid", 0.0, 2.0, 0.3, o.liquidIor, {{testing::databaseDye("AF488"), 20e-6}})
+                              : addMedium(scene, "liquid", 0.3, 2.0, 0.3, o.liquidIor);
     const int glass = addMedium(scene, "glass", 0.0, 0.0, 0.0, o.glassIor);
     int material = kNone;
     if (o.dielectricSurfaces) {
@@ -45,7 +49,7 @@ Scene shellScene(const ShellScene& o) {
         ShapeInfo info;
         info.name = "lamp";
         scene.shapes.push_back(info);
-        scene.addAreaLight(lamp, AreaEmission{Spectrum::constant(10.0), false});
+        scene.addAreaLight(lamp, AreaEmission{o.dyed ? Spectrum::lines({{495.0, 10.0}}) : Spectrum::constant(10.0), false});
     } else {
         scene.lights.push_back(PointLight{lampAt, Spectrum::constant(10.0 * kPi * sqr(o.pointAs * 1e-3))});
     }
@@ -54,7 +58,11 @@ Scene shellScene(const ShellScene& o) {
     return scene;
 }
 
-std::string text(const Estimate& e) { return std::to_string(e.mean) + " +- " + std::to_string(e.stderr_); }
+std::string text(const Estimate& e) {
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.4g +- %.2g", e.mean, e.stderr_);
+    return buf;
+}
 
 // Records both estimates (in the test's XML output) and requires them to agree within 4 standard errors.
 void expectAgreement(const char* aName, const Estimate& a, const char* bName, const Estimate& b) {
@@ -87,6 +95,19 @@ TEST(Mnee, IndexOneGlassEqualsPlainNextEventEstimation) {
     o.integrator = Integrator::Path;
     const Estimate nee = seen(shellScene(o), 40000, 32);
     expectAgreement("mnee", mnee, "nee", nee);
+}
+
+// Fluorescence across the chains: the camera path (at emission wavelengths) branches at the dye, and the
+// excitation sub-path, at the lamp's line, reaches the lamp through the glass by a chain. The lamp's
+// line is dark at the camera path's wavelengths, so everything seen is re-emitted light.
+TEST(Mnee, FluorescenceBehindGlassAgreesWithThePathTracer) {
+    ShellScene o;
+    o.dyed = true;
+    const Estimate mnee = seen(shellScene(o), 100000, 51);
+    o.integrator = Integrator::Path;
+    const Estimate path = seen(shellScene(o), 2000000, 52);
+    expectAgreement("mnee", mnee, "path", path);
+    EXPECT_LT(mnee.stderr_, 0.1 * mnee.mean);
 }
 
 // A point light behind glass: the path tracer cannot reach it at all (its energy is simply missing), and
