@@ -185,14 +185,13 @@ void runRender(const RenderArgs& a) {
     opt.cancel = &installInterruptHandlers();
     if (!cluster::isRoot()) return serveBands(scene, film, opt);  // MPI: render the bands rank 0 hands out
     ProgressBar bar("render");
-    const auto progressStart = std::chrono::steady_clock::now();
-    opt.progress = [&](double f) {
-        // A timed render is as far along as its budget is spent, unless its spp target comes first.
-        if (a.time) f = std::max(f, std::chrono::duration<double>(std::chrono::steady_clock::now() - progressStart).count() / *a.time);
-        bar.update(std::min(f, 1.0));
-    };
     auto lastCheckpoint = std::chrono::steady_clock::now();
     const auto start = lastCheckpoint;
+    opt.progress = [&](double f) {
+        // A timed render is as far along as its budget is spent, unless its spp target comes first.
+        if (a.time) f = std::max(f, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() / *a.time);
+        bar.update(std::min(f, 1.0));
+    };
     const RenderCheckpoint base = ckpt;
     // The image and the checkpoint of the finished passes; `runStats` are this run's.
     auto save = [&](const Film& f, int sppDone, const PathStats& runStats, const RenderSummary* summary) {

@@ -85,12 +85,6 @@ void Film::accumulate(double* xyz, double* spectral, const SampledSpectrum& L, c
     }
 }
 
-Film::Row Film::row(int y) const {
-    Row r;
-    r.y = y;
-    return r;
-}
-
 void Film::commit(const Row& r) {
     for (const Row::Sample& s : r.samples) addSpectra(s.x, r.y, s.elastic, s.fluorescent, s.wl);
 }

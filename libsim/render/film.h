@@ -58,7 +58,6 @@ public:
             samples.clear();
         }
     };
-    Row row(int y) const;
     void addSample(Row& row, int x, const PathRadiance& L, const SampledWavelengths& wl) const;
     void commit(const Row& row);
 

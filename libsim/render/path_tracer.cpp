@@ -282,8 +282,7 @@ struct PathTracer::PathState {
     // path has since crossed its first chainNext interfaces outward by refraction and nothing else. An
     // area light reached at the end of the whole chain is that strategy's, and the path leaves it out.
     int chainShells = -1, chainNext = 0;
-    Vec3 chainOrigin, chainDirection;  // the vertex and the phase-sampled direction the chain left it in
-    double chainPhasePdf = 0;
+    Vec3 chainOrigin, chainDirection;  // the vertex and the phase-sampled direction (pdf lastPhasePdf) it left in
     // The image level of the first vertex (CameraPathImaging::imageLevel), and what branches on the
     // first segment contributed, by their own levels.
     int level = 0;
@@ -786,7 +785,6 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         lightSampledAtLastVertex = true;
         st.chainOrigin = p;
         st.chainDirection = wi;
-        st.chainPhasePdf = phasePdf;
         st.sheetSampledAtLastVertex = sheets;
         st.lastFloorExtinction = floorExtinction;
         st.emissionSampledAtLastVertex = emission;
@@ -967,7 +965,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                     const double d2 = dot(toLight, toLight);
                     const double pdfArea = lights_.pdf(st.chainOrigin, hit->shape, hit->p, hit->n) * std::abs(dot(hit->n, toLight)) / (d2 * std::sqrt(d2));
                     const double pdfChain = path ? pdfArea * areaPerSolidAngle(sh, st.chainOrigin, *path, hit->p, hit->n) : 0.0;
-                    const double pdfPhase = path ? st.chainPhasePdf * path->fresnel : 0.0;
+                    const double pdfPhase = path ? st.lastPhasePdf * path->fresnel : 0.0;
                     c = beta * Le * (1 - chainWeight(pdfChain, pdfPhase)) / r_u.average();
                 } else if (!lightSampledAtLastVertex) c = beta * Le / r_u.average();
                 else {
@@ -983,20 +981,17 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             }
         }
         // The chain of manifold next-event estimation: its next interface, crossed outward by refraction
-        // (or index-matched), advances it; any other surface event ends it.
+        // (or index-matched), advances it; any other surface event ends it. Other index-matched
+        // interfaces leave it as it is, as they leave its transmittance.
+        const bool chainExpectsHit = st.chainShells >= 0 && st.chainNext < shells_[static_cast<size_t>(st.chainShells)].count &&
+                                     hit->shape == shells_[static_cast<size_t>(st.chainShells)].shape[static_cast<size_t>(st.chainNext)];
         auto followChain = [&](bool transmitted, const Vec3& dir) {
-            if (st.chainShells < 0) return;
-            const SphericalShells& sh = shells_[static_cast<size_t>(st.chainShells)];
-            if (st.chainNext < sh.count && hit->shape == sh.shape[static_cast<size_t>(st.chainNext)] && transmitted && dot(dir, hit->n) > 0)
-                ++st.chainNext;
-            else
-                st.chainShells = -1;
+            if (chainExpectsHit && transmitted && dot(dir, hit->n) > 0) ++st.chainNext;
+            else st.chainShells = -1;
         };
         if (shape.material == kNone) {
             if (!shape.isInterface) break;  // black emitter or absorber
-            if (st.chainShells >= 0 && st.chainNext < shells_[static_cast<size_t>(st.chainShells)].count &&
-                hit->shape == shells_[static_cast<size_t>(st.chainShells)].shape[static_cast<size_t>(st.chainNext)])
-                followChain(true, ray.d);
+            if (chainExpectsHit) followChain(true, ray.d);
             medium = mediumAfterCrossing(shape, hit->n, ray.d, medium);
             ray.o = hit->p;
             st.tMin = leavingTMin(hit->n, ray.d, hit->epsilon);

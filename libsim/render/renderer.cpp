@@ -17,7 +17,7 @@ void RenderOptions::validate() const {
     if (spp <= 0 || spp > (1 << 24)) throw ConfigError("--spp: must lie in [1, 16777216], got " + std::to_string(spp));
     checkThreadCount(threads, "--threads");
     if (!(timeBudgetSeconds >= 0) || timeBudgetSeconds > 1e9)
-        throw ConfigError("--time: must lie in (0, 1e9] seconds, got " + messageNumber(timeBudgetSeconds));
+        throw ConfigError("--time: must be 0 (no budget) or lie in (0, 1e9] seconds, got " + messageNumber(timeBudgetSeconds));
     if (sppPerPass < 0) throw ConfigError("spp per pass must be 0 (automatic) or positive, got " + std::to_string(sppPerPass));
     if (firstSample < 0 || firstSample > spp)
         throw ConfigError("--spp: must be at least the " + std::to_string(firstSample) + " samples per pixel already rendered, got " +

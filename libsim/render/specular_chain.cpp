@@ -99,7 +99,7 @@ int shellPaths(const SphericalShells& s, const Vec3& x, const Vec3& y, std::arra
     auto refine = [&](double lo, double hi, double flo, double fhi, double sign) {
         int side = 0;
         double mid = lo;
-        for (int it = 0; it < options.bisections && hi - lo > 1e-15; ++it) {
+        for (int it = 0; it < options.steps && hi - lo > 1e-15; ++it) {
             mid = std::clamp((lo * fhi - hi * flo) / (fhi - flo), lo, hi);
             const double fm = turn(mid, sign);
             if (fm == 0) break;

@@ -43,7 +43,7 @@ std::optional<ShellPath> traceShells(const SphericalShells& s, const Vec3& x, co
 struct ShellRootOptions {
     int brackets = 32;    // directions per interval of valid directions (up to four) that bracket roots; two
                           // roots within one bracket are missed (tested against 4096)
-    int bisections = 60;  // at most this many steps of regula falsi per root
+    int steps = 60;  // at most this many steps of regula falsi per root
 };
 
 // Every refracted path from x (inside) to y (outside the outermost interface), at most `maxRoots`.

@@ -41,13 +41,13 @@ SampledSpectrum LightSampler::emitted(const AreaLight& light, const Vec3& n, con
     return light.emission.radiance.sampleEmission(wl);
 }
 
-SampledSpectrum LightSampler::deltaIntensity(const Light& light, const Vec3& w, const SampledWavelengths& wl) {
+SampledSpectrum LightSampler::deltaIntensity(const Light& light, const Vec3& w, const SampledWavelengths& wl, double squaredDistanceMm) {
     const PointLight* pl = std::get_if<PointLight>(&light);
     const SpotLight* sl = std::get_if<SpotLight>(&light);
     if (!pl && !sl) return SampledSpectrum(0.0);
     // The spot's smoothstep falloff towards its cone edge.
     const double falloff = sl ? smoothStep(dot(w, sl->direction), sl->cosTotalWidth, sl->cosFalloffStart) : 1.0;
-    return (pl ? pl->intensity : sl->intensity).sampleEmission(wl) * (falloff * kMm2PerM2);
+    return (pl ? pl->intensity : sl->intensity).sampleEmission(wl) * (falloff * kMm2PerM2 / squaredDistanceMm);
 }
 
 std::optional<LightSample> LightSampler::sample(const Vec3& ref, double uLight, double u1, double u2,
@@ -62,14 +62,13 @@ std::optional<LightSample> LightSampler::sample(const Vec3& ref, double uLight, 
     const PointLight* pl = std::get_if<PointLight>(&light);
     const SpotLight* sl = std::get_if<SpotLight>(&light);
     if (pl || sl) {
-        // Delta lights: irradiance I / d^2, with the spot's smoothstep falloff towards its cone edge.
+        // Delta lights: irradiance I / d^2.
         ls.p = pl ? pl->position : sl->position;
         const Vec3 d = ls.p - ref;
         ls.distance = length(d);
         if (!(ls.distance > 0)) return std::nullopt;
         ls.wi = d / ls.distance;
-        const double falloff = sl ? smoothStep(dot(-ls.wi, sl->direction), sl->cosTotalWidth, sl->cosFalloffStart) : 1.0;
-        ls.L = (pl ? pl->intensity : sl->intensity).sampleEmission(wl) * (falloff * kMm2PerM2 / sqr(ls.distance));
+        ls.L = deltaIntensity(light, -ls.wi, wl, sqr(ls.distance));
         ls.pdf = selectPdf;
         ls.delta = true;
         return ls;

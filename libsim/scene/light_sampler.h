@@ -35,9 +35,10 @@ public:
     double pdf(const Vec3& ref, uint32_t shape, const Vec3& pLight, const Vec3& nLight) const;
     // Radiance leaving an area light at a point with normal n towards direction w.
     SampledSpectrum emitted(const AreaLight& light, const Vec3& n, const Vec3& w, const SampledWavelengths& wl) const;
-    // A point or spot light's intensity toward direction w (leaving it), times kMm2PerM2: divided by a
-    // squared distance in mm it is LightSample::L. Zero for other lights.
-    static SampledSpectrum deltaIntensity(const Light& light, const Vec3& w, const SampledWavelengths& wl);
+    // A point or spot light's intensity toward direction w (leaving it), times kMm2PerM2, over
+    // squaredDistanceMm: at the default 1, the intensity; at a squared distance, LightSample::L there.
+    // Zero for other lights.
+    static SampledSpectrum deltaIntensity(const Light& light, const Vec3& w, const SampledWavelengths& wl, double squaredDistanceMm = 1.0);
 
 private:
     const Scene& scene_;

@@ -35,7 +35,8 @@ TEST(Film, StagedRowsGiveTheSameSumsAsDirectSamples) {
     int k = 0;
     for (int pass = 0; pass < 3; ++pass)
         for (int y = 0; y < 2; ++y) {
-            Film::Row row = staged.row(y);
+            Film::Row row;
+            row.reset(y);
             for (int x = 0; x < 3; ++x, ++k) {
                 const auto [L, wl] = sample(k);
                 direct.addSample(x, y, L, wl);
@@ -47,7 +48,8 @@ TEST(Film, StagedRowsGiveTheSameSumsAsDirectSamples) {
         }
     EXPECT_EQ(state(direct), state(staged));
     // A non-finite sample is counted in the row and dropped.
-    Film::Row row = staged.row(1);
+    Film::Row row;
+    row.reset(1);
     staged.addSample(row, 2, PathRadiance{SampledSpectrum(NAN), SampledSpectrum(0.0)}, sample(1).second);
     staged.commit(row);
     EXPECT_EQ(staged.nonFiniteSamples(), 1u);
