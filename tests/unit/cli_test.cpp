@@ -233,6 +233,11 @@ TEST(Cli, TimedRenderStopsAtAFinishedPassAndEqualsARenderOfItsSpp) {
     EXPECT_EQ(readExr(out.string()).attributes.at("fluorosim.spp"), std::to_string(done));
     EXPECT_TRUE(fs::exists(out.string() + ".checkpoint"));
     EXPECT_TRUE(contains(timed.err, "--resume continues it")) << timed.err;
+    // Its checkpoint is refused to a resume with another integrator, and kept.
+    const auto other = runCli(dir, {"render", scene.string(), "-o", out.string(), "--resume", "--time", "0.5", "--integrator", "mnee"});
+    EXPECT_EQ(other.exitCode, 2);
+    expectOneLineError(other, {"--integrator", out.string() + ".checkpoint", "\"path\"", "\"mnee\""});
+    EXPECT_TRUE(fs::exists(out.string() + ".checkpoint"));
     const fs::path reference = dir.path() / "reference.exr";
     const auto refRun = runCli(dir, {"render", scene.string(), "-o", reference.string(), "--spp", std::to_string(done), "--threads", "1"});
     ASSERT_EQ(refRun.exitCode, 0) << refRun.err;
