@@ -282,6 +282,7 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         computed = u.electrons;
         emissionPoints = u.emission;
         r.computedPoints = u.points;
+        r.computedDroppedFraction = u.droppedFraction;
         r.computedSeconds = u.seconds;
         r.computedTimings = u.timings;
         r.computedImage = u.electrons;

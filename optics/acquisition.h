@@ -87,6 +87,7 @@ struct PlaneImage {
     double pooledElectrons = 0;  // of the paths' part, what was pooled over pixel blocks (far from focus)
     double computedSeconds = 0, pathSeconds = 0;  // wall time of the computed part, thread time of the paths
     uint64_t computedPoints = 0;                  // emission points of the computed part's quadrature
+    double computedDroppedFraction = 0;           // the faintest points' share left out of its projection
     UnscatteredTimings computedTimings;           // where the computed part's time went
     std::vector<double> computedImage;            // the computed part alone (split estimator; empty otherwise)
     // The excitation field (split estimator with a field): its photons and time over the plane's beam line

@@ -39,6 +39,7 @@ std::string AcquisitionSummary::addPlane(size_t slot, int plane, const PlaneImag
     computedSeconds_ += image.computedSeconds;
     pathSeconds_ += image.pathSeconds;
     computedPoints_ += image.computedPoints;
+    computedDropped_ = std::max(computedDropped_, image.computedDroppedFraction);
     computedTimings_.lattice += image.computedTimings.lattice;
     computedTimings_.transmittances += image.computedTimings.transmittances;
     computedTimings_.gains += image.computedTimings.gains;
@@ -87,6 +88,8 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
         {"", "pooled_electrons_fraction", pooledSum_ / total},
         {"", "computed_seconds", computedSeconds_},
         {"", "computed_points", double(computedPoints_), false, true},
+        // The largest share of a plane's computed photoelectrons left out with its faintest points.
+        {"", "computed_dropped_fraction", computedDropped_},
         // Where the computed part's time went: S and the transmittances once per channel, then per plane
         // the sheet's gains and the projection.
         {"computed_timings", "lattice_seconds", computedTimings_.lattice},
@@ -114,6 +117,9 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
         {"", "seconds", seconds_},
         {"", "paths", double(stats_.paths), false, true},
         {"", "mean_path_vertices", vertices},
+        // Free-flight work per path (real, null and fluorescence branch points) and excitation sub-paths started.
+        {"", "mean_tentative_collisions", double(stats_.tentativeCollisions) / std::max<double>(1.0, double(stats_.paths))},
+        {"", "mean_fluorescence_branches", double(stats_.fluorescenceBranches) / std::max<double>(1.0, double(stats_.paths))},
         {"", "truncated_paths", double(stats_.truncated), false, true},
         {"", "largest_sample_electrons", largest_},
         {"", "max_expected_electrons", double(maxE)},

@@ -49,6 +49,10 @@ struct UnscatteredOptions {
     // Dyes whose photoelectrons per mol/L in the channel fall below this fraction of its most efficient
     // dye's are left out of the computed image (and, covered by it, of the paths' core emission too).
     double dropDyesBelow = 1e-5;
+    // The faintest points of a plane, together at most this fraction of the photoelectrons its points send,
+    // are left out of its projection (they still feed the scattered emission's proposal). Points far out in
+    // the sheet's Gaussian flanks are faint and defocused, so their kernels are the widest.
+    double dropPointsBelow = 1e-4;
     // False: every transmittance is 1 (no attenuation by the media or the dyes), the image of a perfect
     // microscope with this objective and sheet (the ground truth, optics/ground_truth.h).
     bool attenuation = true;
@@ -97,6 +101,8 @@ struct UnscatteredTimings {
 struct UnscatteredPlane {
     std::vector<double> electrons;  // expected photoelectrons per pixel, row-major from the top
     uint64_t points = 0;            // emission points lit in this plane
+    uint64_t droppedPoints = 0;     // of them, left out of the projection (UnscatteredOptions::dropPointsBelow)
+    double droppedFraction = 0;     // their share of the photoelectrons the points send
     double seconds = 0;
     UnscatteredTimings timings;
     bool complete = true;           // false when cancelled

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <map>
 #include <unordered_map>
 
 #include "core/errors.h"
@@ -32,6 +33,7 @@ bool sameTransform(const Affine& a, const Affine& b) {
 void MajorantGridOptions::validate() const {
     if (cellVoxels < -1) throw ConfigError("majorant cell size must be >= 1 voxel (0: automatic, -1: one global cell), got " + std::to_string(cellVoxels));
     if (targetCells < 1 || targetCells > 1024) throw ConfigError("majorant target cell count must lie in [1, 1024], got " + std::to_string(targetCells));
+    if (maxCells < 1) throw ConfigError("majorant cell cap must be >= 1, got " + std::to_string(maxCells));
 }
 
 VolumeFields::VolumeFields(std::vector<VolumeChannel> channels, const Affine& worldFromFile, Interpolation interpolation,
@@ -78,7 +80,15 @@ VolumeFields::VolumeFields(std::vector<VolumeChannel> channels, const Affine& wo
         longest = std::max(longest, extent[a]);
     }
     int64_t cell = majorants.cellVoxels;
-    if (cell == 0) cell = std::max<int64_t>(4, (longest + majorants.targetCells - 1) / majorants.targetCells);
+    if (cell == 0) {
+        cell = std::clamp<int64_t>((longest + majorants.targetCells - 1) / majorants.targetCells, 4, 8);
+        const auto count = [&](int64_t c) {
+            double n = 1;
+            for (int a = 0; a < 3; ++a) n *= double((extent[a] + c - 1) / c);
+            return n;
+        };
+        while (count(cell) > double(majorants.maxCells)) ++cell;
+    }
     double cellCount = 1;
     for (int a = 0; a < 3; ++a) {
         const int64_t size = cell < 0 ? extent[a] : cell;
@@ -86,12 +96,12 @@ VolumeFields::VolumeFields(std::vector<VolumeChannel> channels, const Affine& wo
         cells_[a] = static_cast<int>((extent[a] + size - 1) / size);
         cellCount *= cells_[a];
     }
-    if (cellCount * static_cast<double>(channels_.size()) > double(1 << 28))
+    if (cellCount > double(std::numeric_limits<uint32_t>::max()) || cellCount * static_cast<double>(channels_.size()) > double(1 << 28))
         throw ConfigError("the majorant grid would have " + std::to_string(static_cast<int64_t>(cellCount)) +
                           " cells; use a larger majorant cell size");
+    // Cells no block touches hold the outside values (entry 0); only touched cells are gathered.
     const size_t nc = channels_.size();
-    std::vector<double> dense(static_cast<size_t>(cellCount) * nc);
-    for (size_t i = 0; i < dense.size(); ++i) dense[i] = outside_[i % nc];
+    std::unordered_map<size_t, std::vector<double>> touched;
     for (size_t c = 0; c < nc; ++c) {
         const VolumeChannel& ch = channels_[c];
         if (!ch.grid) continue;
@@ -107,21 +117,31 @@ VolumeFields::VolumeFields(std::vector<VolumeChannel> channels, const Affine& wo
             for (int k = lo[2]; k <= hi[2]; ++k)
                 for (int j = lo[1]; j <= hi[1]; ++j)
                     for (int i = lo[0]; i <= hi[0]; ++i) {
-                        double& m = dense[((static_cast<size_t>(k) * cells_[1] + j) * cells_[0] + i) * nc + c];
-                        m = std::max(m, v);
+                        auto [it, added] = touched.try_emplace((static_cast<size_t>(k) * cells_[1] + j) * cells_[0] + static_cast<size_t>(i));
+                        if (added) it->second = outside_;
+                        it->second[c] = std::max(it->second[c], v);
                     }
         });
     }
-    std::unordered_map<std::string, uint32_t> entries;
-    cellEntry_.resize(static_cast<size_t>(cellCount));
-    for (size_t n = 0; n < cellEntry_.size(); ++n) {
-        const double* m = &dense[n * nc];
-        const auto [it, added] = entries.try_emplace(std::string(reinterpret_cast<const char*>(m), nc * sizeof(double)),
-                                                     static_cast<uint32_t>(entries.size()));
-        if (added) cellMaxima_.insert(cellMaxima_.end(), m, m + nc);
-        cellEntry_[n] = it->second;
+    std::map<std::vector<double>, uint32_t> entries{{outside_, 0}};
+    cellMaxima_ = outside_;
+    cellEntry_.assign(static_cast<size_t>(cellCount), 0);
+    for (const auto& [cell, maxima] : touched) {
+        const auto [it, added] = entries.try_emplace(maxima, static_cast<uint32_t>(entries.size()));
+        if (added) cellMaxima_.insert(cellMaxima_.end(), maxima.begin(), maxima.end());
+        cellEntry_[cell] = it->second;
     }
     cellMaxima_.shrink_to_fit();
+    for (int a = 0; a < 3; ++a) blocks_[a] = (cells_[a] + kBlockCells - 1) / kBlockCells;
+    blockEntry_.assign(static_cast<size_t>(blocks_[0]) * blocks_[1] * blocks_[2], -2);  // -2: no cell seen yet
+    for (int k = 0; k < cells_[2]; ++k)
+        for (int j = 0; j < cells_[1]; ++j)
+            for (int i = 0; i < cells_[0]; ++i) {
+                const auto e = static_cast<int32_t>(cellEntry_[(static_cast<size_t>(k) * cells_[1] + j) * cells_[0] + static_cast<size_t>(i)]);
+                int32_t& b = blockEntry_[(static_cast<size_t>(k / kBlockCells) * blocks_[1] + j / kBlockCells) * blocks_[0] +
+                                         static_cast<size_t>(i / kBlockCells)];
+                b = b == -2 || b == e ? e : -1;
+            }
 }
 
 void VolumeFields::values(const Vec3& pWorld, double* out) const {
@@ -190,25 +210,70 @@ VolumeFields::Traversal VolumeFields::traverse(const Ray& worldRay, double tMin,
     if (!(t0 < t1)) return tr;
     tr.tEnter_ = t0;
     tr.tExit_ = t1;
-    const Vec3 p = o + d * t0;
+    tr.o_ = o;
+    tr.d_ = d;
+    tr.blockExit_ = t0;  // where the first block is entered
+    std::array<double, 3> blockSize;
+    for (int a = 0; a < 3; ++a) blockSize[a] = cellSize_[a] * kBlockCells;
+    tr.start(tr.block_, t0, blockSize, {0, 0, 0}, {blocks_[0] - 1, blocks_[1] - 1, blocks_[2] - 1});
+    return tr;
+}
+
+// A DDA over cells of `size` (index space, from the domain's corner) at the ray's point t, clamped to
+// cells lo..hi.
+void VolumeFields::Traversal::start(Dda& dda, double t, const std::array<double, 3>& size, const std::array<int, 3>& lo,
+                                    const std::array<int, 3>& hi) const {
+    const Vec3 p = o_ + d_ * t;
+    const Vec3& origin = f_->domainLo_;
     for (int a = 0; a < 3; ++a) {
-        const double rel = (p[a] - domainLo_[a]) / cellSize_[a];
-        tr.cell_[a] = std::clamp(static_cast<int>(std::floor(rel)), 0, cells_[a] - 1);
-        if (d[a] > 0) {
-            tr.step_[a] = 1;
-            tr.tNext_[a] = (domainLo_[a] + (tr.cell_[a] + 1) * cellSize_[a] - o[a]) / d[a];
-            tr.tDelta_[a] = cellSize_[a] / d[a];
-        } else if (d[a] < 0) {
-            tr.step_[a] = -1;
-            tr.tNext_[a] = (domainLo_[a] + tr.cell_[a] * cellSize_[a] - o[a]) / d[a];
-            tr.tDelta_[a] = -cellSize_[a] / d[a];
+        dda.cell[a] = std::clamp(static_cast<int>(std::floor((p[a] - origin[a]) / size[a])), lo[a], hi[a]);
+        if (d_[a] > 0) {
+            dda.step[a] = 1;
+            dda.tNext[a] = (origin[a] + (dda.cell[a] + 1) * size[a] - o_[a]) / d_[a];
+            dda.tDelta[a] = size[a] / d_[a];
+        } else if (d_[a] < 0) {
+            dda.step[a] = -1;
+            dda.tNext[a] = (origin[a] + dda.cell[a] * size[a] - o_[a]) / d_[a];
+            dda.tDelta[a] = -size[a] / d_[a];
         } else {
-            tr.step_[a] = 0;
-            tr.tNext_[a] = kInf;
-            tr.tDelta_[a] = kInf;
+            dda.step[a] = 0;
+            dda.tNext[a] = kInf;
+            dda.tDelta[a] = kInf;
         }
     }
-    return tr;
+}
+
+// One uniform block, or one cell of a mixed block, from t_ on.
+VolumeFields::Traversal::Piece VolumeFields::Traversal::piece() {
+    if (!inBlock_) {
+        const std::array<int, 3> b = block_.cell;
+        const int axis = block_.axis();
+        const double enter = blockExit_;
+        blockExit_ = block_.tNext[axis];
+        block_.cell[axis] += block_.step[axis];
+        block_.tNext[axis] += block_.tDelta[axis];
+        // The last block reaches the domain's exit even when rounding steps out of range first.
+        blockLast_ = blockExit_ >= tExit_ || block_.cell[axis] < 0 || block_.cell[axis] >= f_->blocks_[axis];
+        if (blockLast_) blockExit_ = tExit_;
+        if (const double* values = f_->blockMax(b)) return {blockExit_, values, blockLast_};
+        for (int a = 0; a < 3; ++a) {
+            blockCellLo_[a] = b[a] * kBlockCells;
+            blockCellHi_[a] = std::min(f_->cells_[a], blockCellLo_[a] + kBlockCells) - 1;
+        }
+        start(cell_, enter, f_->cellSize_, blockCellLo_, blockCellHi_);
+        inBlock_ = true;
+    }
+    const double* values = f_->cellMax(cell_.cell);
+    const int axis = cell_.axis();
+    double end = cell_.tNext[axis];
+    cell_.cell[axis] += cell_.step[axis];
+    cell_.tNext[axis] += cell_.tDelta[axis];
+    if (end >= blockExit_ || cell_.cell[axis] < blockCellLo_[axis] || cell_.cell[axis] > blockCellHi_[axis]) {
+        end = blockExit_;
+        inBlock_ = false;
+        return {end, values, blockLast_};
+    }
+    return {end, values, false};
 }
 
 std::optional<MajorantCellSegment> VolumeFields::Traversal::next() {
@@ -226,17 +291,21 @@ std::optional<MajorantCellSegment> VolumeFields::Traversal::next() {
             continue;
         }
         if (phase_ == 1) {
-            const int axis = tNext_[0] < tNext_[1] ? (tNext_[0] < tNext_[2] ? 0 : 2) : (tNext_[1] < tNext_[2] ? 1 : 2);
-            const double* values = f_->cellMax(cell_);
-            double end = std::min(tNext_[axis], tEnd_);
-            cell_[axis] += step_[axis];
-            tNext_[axis] += tDelta_[axis];
-            // The last cell reaches the domain's exit even when rounding steps out of range first.
-            if (end >= tExit_ || cell_[axis] < 0 || cell_[axis] >= f_->cells_[axis]) {
-                end = std::min(tExit_, tEnd_);
-                phase_ = 2;
+            Piece p = pending_ ? *pending_ : piece();
+            pending_.reset();
+            // Consecutive pieces with the same maxima (empty space, one dye's neurite at full
+            // concentration) make one segment, so the tracker's per-segment work is paid once.
+            while (!p.last && p.end < tEnd_) {
+                const Piece q = piece();
+                if (q.values != p.values) {
+                    pending_ = q;
+                    break;
+                }
+                p.end = q.end;
+                p.last = q.last;
             }
-            const MajorantCellSegment s{t_, std::max(t_, end), values};
+            if (p.last) phase_ = 2;
+            const MajorantCellSegment s{t_, std::max(t_, std::min(p.end, tEnd_)), p.values};
             t_ = s.tMax;
             if (s.tMax > s.tMin) return s;
             continue;

@@ -68,13 +68,17 @@ struct Microscope {
     }
 };
 
-std::vector<double> computed(const Scene& scene, const Microscope& s, const optics::UnscatteredOptions& u, int threads = 0) {
+optics::UnscatteredPlane computedPlane(const Scene& scene, const Microscope& s, const optics::UnscatteredOptions& u, int threads = 0) {
     optics::AcquireOptions o;
     o.unscattered = u;
     const optics::ChannelImaging channel =
         optics::setUpChannelImaging(scene, scene.lights, s.objective, optics::FocalPlane{}, s.filter, s.detector, s.size, s.size, o);
     const optics::Imaging imaging(s.objective, optics::FocalPlane{}, s.detector, s.size, s.size, channel.psf);
-    return optics::computeUnscatteredImage(scene, scene.lights, imaging, *channel.unscattered, threads).electrons;
+    return optics::computeUnscatteredImage(scene, scene.lights, imaging, *channel.unscattered, threads);
+}
+
+std::vector<double> computed(const Scene& scene, const Microscope& s, const optics::UnscatteredOptions& u, int threads = 0) {
+    return computedPlane(scene, s, u, threads).electrons;
 }
 
 double relativeL2(const std::vector<double>& a, const std::vector<double>& b) {
@@ -109,6 +113,7 @@ TEST(UnscatteredImage, EachQuadratureConvergesAsItIsRefined) {
         {"pixel quadrature", [](optics::UnscatteredOptions& u, int l) { u.pixelQuadrature = 3 << l; }},
         {"far bins", [](optics::UnscatteredOptions& u, int l) { u.farBinUm = 2.0 / (2 << (l - 1)); }},
         {"near kernel", [](optics::UnscatteredOptions& u, int l) { u.nearPixels = 2 << l, u.nearTaperPixels = 3 << l; }},
+        {"faintest points left out", [](optics::UnscatteredOptions& u, int l) { u.dropPointsBelow = l == 1 ? 1e-5 : 0.0; }},
     };
     for (const Knob& k : knobs) {
         optics::UnscatteredOptions fine = defaults, finer = defaults;
@@ -119,6 +124,34 @@ TEST(UnscatteredImage, EachQuadratureConvergesAsItIsRefined) {
         std::printf("  %-26s default vs finest %.2e, finer vs finest %.2e\n", k.name, errorDefault, errorFine);
         EXPECT_LT(errorDefault, 0.01) << k.name;
     }
+}
+
+// The faintest points (the sheet's flanks) are left out of the projection within a budget of the
+// photoelectrons the points send: the image loses at most that share, and nothing when the budget is 0.
+TEST(UnscatteredImage, TheFaintestPointsLeftOutStayWithinTheirBudget) {
+    const Scene scene = neuriteScene(1.0);
+    const Microscope s;
+    optics::UnscatteredOptions all, some;
+    all.dropPointsBelow = 0;
+    some.dropPointsBelow = 1e-3;
+    const optics::UnscatteredPlane a = computedPlane(scene, s, all), b = computedPlane(scene, s, some);
+    EXPECT_EQ(a.droppedPoints, 0u);
+    EXPECT_EQ(a.droppedFraction, 0.0);
+    EXPECT_EQ(a.points, b.points);
+    double sumA = 0, sumB = 0, largest = 0;
+    for (double e : a.electrons) largest = std::max(largest, e);
+    for (size_t i = 0; i < a.electrons.size(); ++i) {
+        sumA += a.electrons[i];
+        sumB += b.electrons[i];
+        ASSERT_LE(b.electrons[i], a.electrons[i] + 1e-12 * largest) << "pixel " << i;  // emissions only removed (FFT round-off)
+    }
+    std::printf("  left out %llu of %llu points, %.3g of their photoelectrons; image %.6g -> %.6g e-\n",
+                static_cast<unsigned long long>(b.droppedPoints), static_cast<unsigned long long>(b.points), b.droppedFraction, sumA, sumB);
+    EXPECT_GT(b.droppedPoints, 0u);
+    EXPECT_GT(b.droppedFraction, 0.0);
+    EXPECT_LE(b.droppedFraction, 1e-3);
+    // The camera sees part of what the points send, so it loses at most about the same share.
+    EXPECT_LE(1 - sumB / sumA, 1e-3 * 1.5);
 }
 
 // A PSF narrower than a pixel (NA 0.5 at 1.5 µm object pixels: 2.4 cycles of its band per pixel)

@@ -98,6 +98,31 @@ TEST(MajorantGrid, FinerCellsAreTighterAndTheGlobalCellIsTheMaximum) {
     EXPECT_LT(largest, 2.0 * (1 + 0.01 * 64) + 1e-9);
 }
 
+// Cells with the same maxima make one segment, and blocks of such cells are crossed in one step: a ray
+// through a large grid's empty part costs one segment, however many cells it crosses.
+TEST(MajorantGrid, EmptyAndUniformRunsAreOneSegment) {
+    const DensityGrid g = DensityGrid::fromVoxels("corner", {{0, 0, 0}, {199, 199, 199}}, voxels(0.01), [](int i, int j, int k) {
+        return (i < 8 && j < 8 && k < 8) || (i >= 192 && j >= 192 && k >= 192) ? 1.0 : 0.0;  // dye in two opposite corners
+    });
+    std::vector<VolumeChannel> ch(2);
+    ch[0].grid = g;
+    ch[1].offset = 0.5;
+    const VolumeFields f(std::move(ch), Affine(), Interpolation::Trilinear, {1});
+    EXPECT_EQ(f.cellCounts()[0], 203);  // voxels -2 .. 200
+    const auto count = [&](const Ray& ray) {
+        auto tr = f.traverse(ray, 0.0, 10.0);
+        int n = 0;
+        while (tr.next()) ++n;
+        return n;
+    };
+    // Far from the dye: before the domain, the domain's cells (all alike), after it.
+    EXPECT_EQ(count(Ray{f.worldFromIndex().apply(Vec3(-50, 100, 150)), normalize(Vec3(1, 0.1, 0.05))}), 3);
+    // Through the dyed corner: a few more, not one per cell.
+    const int throughDye = count(Ray{f.worldFromIndex().apply(Vec3(-50, 4, 4)), Vec3(1, 0, 0)});
+    EXPECT_GE(throughDye, 4);
+    EXPECT_LE(throughDye, 12);
+}
+
 TEST(MajorantGrid, AllZeroGridHasNoDomain) {
     const DensityGrid g = DensityGrid::fromVoxels("zero", {{0, 0, 0}, {9, 9, 9}}, voxels(0.1), [](int, int, int) { return 0.0; });
     std::vector<VolumeChannel> ch(1);
