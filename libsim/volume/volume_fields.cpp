@@ -125,22 +125,38 @@ VolumeFields::VolumeFields(std::vector<VolumeChannel> channels, const Affine& wo
     }
     std::map<std::vector<double>, uint32_t> entries{{outside_, 0}};
     cellMaxima_ = outside_;
-    cellEntry_.assign(static_cast<size_t>(cellCount), 0);
+    std::vector<uint32_t> dense(static_cast<size_t>(cellCount), 0);
     for (const auto& [cell, maxima] : touched) {
         const auto [it, added] = entries.try_emplace(maxima, static_cast<uint32_t>(entries.size()));
         if (added) cellMaxima_.insert(cellMaxima_.end(), maxima.begin(), maxima.end());
-        cellEntry_[cell] = it->second;
+        dense[cell] = it->second;
     }
     cellMaxima_.shrink_to_fit();
+    // Blocks whose cells share one entry keep it; the others (mixed) keep their cells' entries together,
+    // so that a ray crossing a block reads one small piece of memory.
     for (int a = 0; a < 3; ++a) blocks_[a] = (cells_[a] + kBlockCells - 1) / kBlockCells;
-    blockEntry_.assign(static_cast<size_t>(blocks_[0]) * blocks_[1] * blocks_[2], -2);  // -2: no cell seen yet
+    constexpr int32_t kNoCell = -2, kMixed = -1;
+    blockEntry_.assign(static_cast<size_t>(blocks_[0]) * blocks_[1] * blocks_[2], kNoCell);
+    const auto blockOf = [&](int i, int j, int k) {
+        return (static_cast<size_t>(k / kBlockCells) * blocks_[1] + static_cast<size_t>(j / kBlockCells)) * blocks_[0] + static_cast<size_t>(i / kBlockCells);
+    };
+    const auto denseAt = [&](int i, int j, int k) { return dense[(static_cast<size_t>(k) * cells_[1] + j) * cells_[0] + static_cast<size_t>(i)]; };
     for (int k = 0; k < cells_[2]; ++k)
         for (int j = 0; j < cells_[1]; ++j)
             for (int i = 0; i < cells_[0]; ++i) {
-                const auto e = static_cast<int32_t>(cellEntry_[(static_cast<size_t>(k) * cells_[1] + j) * cells_[0] + static_cast<size_t>(i)]);
-                int32_t& b = blockEntry_[(static_cast<size_t>(k / kBlockCells) * blocks_[1] + j / kBlockCells) * blocks_[0] +
-                                         static_cast<size_t>(i / kBlockCells)];
-                b = b == -2 || b == e ? e : -1;
+                const auto e = static_cast<int32_t>(denseAt(i, j, k));
+                int32_t& b = blockEntry_[blockOf(i, j, k)];
+                b = b == kNoCell || b == e ? e : kMixed;
+            }
+    size_t mixed = 0;
+    for (int32_t& b : blockEntry_)
+        if (b == kMixed) b = -static_cast<int32_t>(++mixed);  // mixed block m is -(m + 1)
+    cellEntry_.assign(mixed * kBlockCells * kBlockCells * kBlockCells, 0);
+    for (int k = 0; k < cells_[2]; ++k)
+        for (int j = 0; j < cells_[1]; ++j)
+            for (int i = 0; i < cells_[0]; ++i) {
+                const int32_t b = blockEntry_[blockOf(i, j, k)];
+                if (b < 0) cellEntry_[static_cast<size_t>(-b - 1) * kBlockCells * kBlockCells * kBlockCells + localCell({i, j, k})] = denseAt(i, j, k);
             }
 }
 
@@ -182,7 +198,7 @@ std::vector<double> VolumeFields::channelFloors() const {
 }
 
 size_t VolumeFields::memoryBytes() const {
-    size_t bytes = cellMaxima_.size() * sizeof(double) + cellEntry_.size() * sizeof(uint32_t);
+    size_t bytes = cellMaxima_.size() * sizeof(double) + cellEntry_.size() * sizeof(uint32_t) + blockEntry_.size() * sizeof(int32_t);
     for (const VolumeChannel& c : channels_)
         if (c.grid) bytes += c.grid->memoryBytes();
     return bytes;
@@ -194,7 +210,7 @@ VolumeFields::Traversal VolumeFields::traverse(const Ray& worldRay, double tMin,
     tr.t_ = tMin;
     tr.tEnd_ = tMax;
     tr.tEnter_ = tr.tExit_ = kInf;
-    if (cellEntry_.empty()) return tr;  // phase 0 with no domain: one outside segment
+    if (blockEntry_.empty()) return tr;  // phase 0 with no domain: one outside segment
     const Vec3 o = indexFromWorld_.apply(worldRay.o), d = indexFromWorld_.applyLinear(worldRay.d);
     double t0 = tMin, t1 = tMax;
     for (int a = 0; a < 3; ++a) {
@@ -256,6 +272,7 @@ VolumeFields::Traversal::Piece VolumeFields::Traversal::piece() {
         blockLast_ = blockExit_ >= tExit_ || block_.cell[axis] < 0 || block_.cell[axis] >= f_->blocks_[axis];
         if (blockLast_) blockExit_ = tExit_;
         if (const double* values = f_->blockMax(b)) return {blockExit_, values, blockLast_};
+        blockCells_ = f_->mixedCells(b);
         for (int a = 0; a < 3; ++a) {
             blockCellLo_[a] = b[a] * kBlockCells;
             blockCellHi_[a] = std::min(f_->cells_[a], blockCellLo_[a] + kBlockCells) - 1;
@@ -263,7 +280,7 @@ VolumeFields::Traversal::Piece VolumeFields::Traversal::piece() {
         start(cell_, enter, f_->cellSize_, blockCellLo_, blockCellHi_);
         inBlock_ = true;
     }
-    const double* values = f_->cellMax(cell_.cell);
+    const double* values = f_->cellValues(blockCells_[localCell(cell_.cell)]);
     const int axis = cell_.axis();
     double end = cell_.tNext[axis];
     cell_.cell[axis] += cell_.step[axis];

@@ -97,6 +97,7 @@ public:
         Vec3 o_, d_;     // the ray in index space
         Dda block_, cell_;
         bool inBlock_ = false;       // stepping through the cells of a mixed block
+        const uint32_t* blockCells_ = nullptr;  // its cells' entries
         bool blockLast_ = false;     // the current block reaches the domain's exit
         double blockExit_ = 0;       // where the current block ends (before it starts: where it begins)
         std::array<int, 3> blockCellLo_{}, blockCellHi_{};
@@ -105,14 +106,21 @@ public:
     Traversal traverse(const Ray& worldRay, double tMin, double tMax) const;
 
 private:
-    const double* cellMax(const std::array<int, 3>& c) const {
-        return &cellMaxima_[cellEntry_[(static_cast<size_t>(c[2]) * cells_[1] + c[1]) * cells_[0] + static_cast<size_t>(c[0])] *
-                            channels_.size()];
+    // A cell's place within its block (blocks of kBlockCells³ cells, x fastest).
+    static size_t localCell(const std::array<int, 3>& c) {
+        return (static_cast<size_t>(c[2] % kBlockCells) * kBlockCells + static_cast<size_t>(c[1] % kBlockCells)) * kBlockCells +
+               static_cast<size_t>(c[0] % kBlockCells);
     }
-    // The maxima shared by every cell of block b, or null where the block's cells differ.
+    const double* cellValues(uint32_t entry) const { return &cellMaxima_[entry * channels_.size()]; }
+    // The maxima shared by every cell of block b, or null where the block's cells differ (mixed).
     const double* blockMax(const std::array<int, 3>& b) const {
         const int32_t e = blockEntry_[(static_cast<size_t>(b[2]) * blocks_[1] + b[1]) * blocks_[0] + static_cast<size_t>(b[0])];
-        return e < 0 ? nullptr : &cellMaxima_[static_cast<size_t>(e) * channels_.size()];
+        return e < 0 ? nullptr : cellValues(static_cast<uint32_t>(e));
+    }
+    // The entries of a mixed block's cells, by localCell.
+    const uint32_t* mixedCells(const std::array<int, 3>& b) const {
+        const int32_t e = blockEntry_[(static_cast<size_t>(b[2]) * blocks_[1] + b[1]) * blocks_[0] + static_cast<size_t>(b[0])];
+        return &cellEntry_[static_cast<size_t>(-e - 1) * kBlockCells * kBlockCells * kBlockCells];
     }
 
     std::vector<VolumeChannel> channels_;
@@ -127,9 +135,9 @@ private:
     // Most cells share their maxima (empty space, one dye's neurite at full concentration), so each
     // distinct set of channel maxima is stored once (channel-minor) and a cell holds its index.
     std::vector<double> cellMaxima_;
-    std::vector<uint32_t> cellEntry_;
     std::array<int, 3> blocks_{0, 0, 0};
-    std::vector<int32_t> blockEntry_;  // the shared entry of a block's cells, -1 where they differ
+    std::vector<int32_t> blockEntry_;  // a block's shared entry, or -(m + 1) for the m-th mixed block
+    std::vector<uint32_t> cellEntry_;  // the mixed blocks' cells, kBlockCells³ each
     std::vector<double> outside_;   // values where every voxel is background
 };
 
