@@ -3,5 +3,8 @@
 # ninja targets.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithAssert >/dev/null
+# Configure once; afterwards ninja re-runs CMake itself when a CMakeLists.txt changes (3-4 s saved per call).
+if [ ! -f build/build.ninja ]; then
+  cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithAssert >/dev/null
+fi
 ninja -C build -j2 "$@"
