@@ -253,12 +253,12 @@ void EmissionGains::planeGains(const std::vector<Light>& lights, double planeOff
                 if (!side.profile->inCore(w, side.side, side.lambdaNm)) continue;
                 if (fieldOf[s] >= 0) {
                     const auto f = static_cast<size_t>(fieldOf[s]);
-                    const double phi = field->scattered(f, w);
-                    if (phi != 0) {
-                        excitation[side.line] += phi;
-                        scattered[side.line] += phi;
+                    const auto phi = field->scatteredWithNoise(f, w);
+                    if (phi.mean != 0) {
+                        excitation[side.line] += phi.mean;
+                        scattered[side.line] += phi.mean;
                         lit = true;
-                        if (fieldGains) difference[side.line] += 0.5 * (field->scattered(f, w, 0) - field->scattered(f, w, 1));
+                        if (fieldGains) difference[side.line] += phi.halfDifference;
                     }
                 }
                 const double E = side.profile->irradiance(w, side.side, side.lambdaNm) * kMm2PerM2 * side.weight;

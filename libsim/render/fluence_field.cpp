@@ -228,8 +228,8 @@ void FluenceGrid::deposit(const Vec3& a, const Vec3& b, double weight) {
     }
 }
 
-double FluenceGrid::at(const Vec3& p) const {
-    if (!box_.contains(p)) return 0.0;
+std::optional<FluenceGrid::Stencil> FluenceGrid::stencil(const Vec3& p) const {
+    if (!box_.contains(p)) return std::nullopt;
     const Vec3 d = p - box_.centre;
     const std::array<double, 3> l{dot(d, box_.right), dot(d, box_.up), dot(d, box_.axis)};
     std::array<int, 3> cell{};
@@ -239,12 +239,18 @@ double FluenceGrid::at(const Vec3& p) const {
         cell[k] = std::clamp(static_cast<int>(std::floor(u)), 0, n_[k] - 2);
         f[k] = std::clamp(u - cell[k], 0.0, 1.0);
     }
-    double v = 0;
+    Stencil s;
     for (int c = 0; c < 8; ++c) {
         const double wx = c & 1 ? f[0] : 1 - f[0], wy = c & 2 ? f[1] : 1 - f[1], wz = c & 4 ? f[2] : 1 - f[2];
-        v += wx * wy * wz * values_[index(cell[0] + (c & 1), cell[1] + ((c >> 1) & 1), cell[2] + ((c >> 2) & 1))];
+        s.weight[static_cast<size_t>(c)] = wx * wy * wz;
+        s.node[static_cast<size_t>(c)] = index(cell[0] + (c & 1), cell[1] + ((c >> 1) & 1), cell[2] + ((c >> 2) & 1));
     }
-    return v;
+    return s;
+}
+
+double FluenceGrid::at(const Vec3& p) const {
+    const auto s = stencil(p);
+    return s ? at(*s) : 0.0;
 }
 
 void FluenceGrid::normalise(double photons) {
@@ -435,6 +441,13 @@ bool BeamExcitationField::contains(const Vec3& y) const {
 double BeamExcitationField::scattered(size_t i, const Vec3& y, int half) const {
     const BeamFluence& f = fields_.at(i);
     return half < 0 ? f.mean.at(y) : f.half[half & 1].at(y);
+}
+
+BeamExcitationField::MeanAndHalfDifference BeamExcitationField::scatteredWithNoise(size_t i, const Vec3& y) const {
+    const BeamFluence& f = fields_.at(i);
+    const auto s = f.mean.stencil(y);  // the halves share the mean's box
+    if (!s) return {};
+    return {f.mean.at(*s), 0.5 * (f.half[0].at(*s) - f.half[1].at(*s))};
 }
 
 std::optional<double> BeamExcitationField::scatteredMeanRadiance(const Vec3& y, double lambdaNm, double coreWeight, double outsideWeight) const {

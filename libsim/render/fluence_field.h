@@ -44,6 +44,17 @@ public:
     void deposit(const Vec3& a, const Vec3& b, double weight);
     // Trilinear interpolation of the node values (0 outside the box).
     double at(const Vec3& p) const;
+    // The eight nodes and weights around p (none outside the box), to read several grids of the same box.
+    struct Stencil {
+        std::array<size_t, 8> node{};
+        std::array<double, 8> weight{};
+    };
+    std::optional<Stencil> stencil(const Vec3& p) const;
+    double at(const Stencil& s) const {
+        double v = 0;
+        for (size_t c = 0; c < 8; ++c) v += s.weight[c] * values_[s.node[c]];
+        return v;
+    }
     // Turns tallies (weight × mm) into fluence: divided by `photons` and each node's hat volume inside
     // the tallied range.
     void normalise(double photons);
@@ -109,6 +120,11 @@ public:
     std::optional<double> scatteredMeanRadiance(const Vec3& y, double lambdaNm, double coreWeight = 1, double outsideWeight = 1) const override;
     // φ of field `i` at y (its mean or one half), W/m².
     double scattered(size_t i, const Vec3& y, int half = -1) const;
+    // The mean and half the difference of the halves at y, from one stencil (the same values as above).
+    struct MeanAndHalfDifference {
+        double mean = 0, halfDifference = 0;
+    };
+    MeanAndHalfDifference scatteredWithNoise(size_t i, const Vec3& y) const;
     const std::vector<BeamFluence>& fields() const { return fields_; }
     bool contains(const Vec3& y) const;
 
