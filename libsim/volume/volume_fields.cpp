@@ -126,10 +126,10 @@ VolumeFields::VolumeFields(std::vector<VolumeChannel> channels, const Affine& wo
     std::map<std::vector<double>, uint32_t> entries{{outside_, 0}};
     cellMaxima_ = outside_;
     std::vector<uint32_t> dense(static_cast<size_t>(cellCount), 0);
-    for (const auto& [cell, maxima] : touched) {
+    for (const auto& [at, maxima] : touched) {
         const auto [it, added] = entries.try_emplace(maxima, static_cast<uint32_t>(entries.size()));
         if (added) cellMaxima_.insert(cellMaxima_.end(), maxima.begin(), maxima.end());
-        dense[cell] = it->second;
+        dense[at] = it->second;
     }
     cellMaxima_.shrink_to_fit();
     // Blocks whose cells share one entry keep it; the others (mixed) keep their cells' entries together,
