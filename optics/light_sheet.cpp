@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <sstream>
+#include <string_view>
 #include <utility>
 
 #include "core/errors.h"
@@ -26,12 +27,14 @@ std::string vecText(const Vec3& v) { return "(" + num(v.x) + ", " + num(v.y) + "
 
 bool positiveFinite(double v) { return v > 0 && std::isfinite(v); }
 
-void requirePositive(double v, const std::string& field, const std::string& unit) {
-    if (!positiveFinite(v)) throw ConfigError(field + ": must be positive and finite, got " + num(v) + unit);
+// Names as views: these checks run per beam evaluation (per point of the computed image), and a
+// std::string parameter built from a literal of 16 characters or more allocated on every call.
+void requirePositive(double v, std::string_view field, std::string_view unit) {
+    if (!positiveFinite(v)) throw ConfigError(std::string(field) + ": must be positive and finite, got " + num(v) + std::string(unit));
 }
 
-void requireIndex(double n, const std::string& field) {
-    if (!(n >= 1.0) || !std::isfinite(n)) throw ConfigError(field + ": must be a finite index >= 1, got " + num(n));
+void requireIndex(double n, std::string_view field) {
+    if (!(n >= 1.0) || !std::isfinite(n)) throw ConfigError(std::string(field) + ": must be a finite index >= 1, got " + num(n));
 }
 
 void requireDirection(const Vec3& v, const std::string& field) {
