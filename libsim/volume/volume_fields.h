@@ -107,9 +107,10 @@ public:
 
 private:
     // A cell's place within its block (blocks of kBlockCells³ cells, x fastest).
-    static size_t localCell(const std::array<int, 3>& c) {
-        return (static_cast<size_t>(c[2] % kBlockCells) * kBlockCells + static_cast<size_t>(c[1] % kBlockCells)) * kBlockCells +
-               static_cast<size_t>(c[0] % kBlockCells);
+    static_assert((kBlockCells & (kBlockCells - 1)) == 0, "blocks are a power of two cells wide");
+    static size_t localCell(const std::array<int, 3>& c) {  // cells are >= 0, so & is the remainder
+        constexpr int mask = kBlockCells - 1;
+        return (static_cast<size_t>(c[2] & mask) * kBlockCells + static_cast<size_t>(c[1] & mask)) * kBlockCells + static_cast<size_t>(c[0] & mask);
     }
     const double* cellValues(uint32_t entry) const { return &cellMaxima_[entry * channels_.size()]; }
     // The maxima shared by every cell of block b, or null where the block's cells differ (mixed).
