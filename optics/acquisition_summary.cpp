@@ -75,7 +75,8 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
     float maxE = 0;
     for (float e : stack.expected) maxE = std::max(maxE, e);
     const double total = std::max(1e-300, computedSum_ + pathSum_);
-    const double vertices = double(stats_.scatteringEvents + stats_.surfaceBounces) / std::max<double>(1.0, double(stats_.paths));
+    const auto perPath = [&](uint64_t n) { return double(n) / std::max<double>(1.0, double(stats_.paths)); };
+    const double vertices = perPath(stats_.scatteringEvents + stats_.surfaceBounces);
     std::vector<Entry> e = {
         {"", "planes", double(stack.planes), false, true},
         {"", "channels", double(stack.channels.size()), false, true},
@@ -118,8 +119,8 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
         {"", "paths", double(stats_.paths), false, true},
         {"", "mean_path_vertices", vertices},
         // Free-flight work per path (real, null and fluorescence branch points) and excitation sub-paths started.
-        {"", "mean_tentative_collisions", double(stats_.tentativeCollisions) / std::max<double>(1.0, double(stats_.paths))},
-        {"", "mean_fluorescence_branches", double(stats_.fluorescenceBranches) / std::max<double>(1.0, double(stats_.paths))},
+        {"", "mean_tentative_collisions", perPath(stats_.tentativeCollisions)},
+        {"", "mean_fluorescence_branches", perPath(stats_.fluorescenceBranches)},
         {"", "truncated_paths", double(stats_.truncated), false, true},
         {"", "largest_sample_electrons", largest_},
         {"", "max_expected_electrons", double(maxE)},

@@ -366,13 +366,16 @@ namespace {
 
 // The emissions without the faintest, whose photoelectrons together stay within `fraction` of all: whole
 // binary orders of magnitude of e relative to the total are left out, faintest first, while their sum
-// fits the budget (relative, so that a scene at another exposure leaves out the same points).
-std::vector<PointEmission> withoutFaintest(const std::vector<PointEmission>& emissions, double fraction, uint64_t& dropped, double& droppedFraction) {
+// fits the budget (relative, so that a scene at another exposure leaves out the same points). Returns
+// false, and leaves `kept` empty, when none is left out.
+bool leaveOutFaintest(const std::vector<PointEmission>& emissions, double fraction, std::vector<PointEmission>& kept, uint64_t& dropped,
+                      double& droppedFraction) {
+    kept.clear();
     dropped = 0;
     droppedFraction = 0;
     double total = 0;
     for (const PointEmission& em : emissions) total += std::abs(em.e);
-    if (!(fraction > 0) || !(total > 0)) return emissions;
+    if (!(fraction > 0) || !(total > 0)) return false;
     constexpr int kMinExponent = -1100, kExponents = 2200;
     std::vector<double> byExponent(kExponents, 0.0);
     const auto exponentOf = [&](double e) {
@@ -384,15 +387,14 @@ std::vector<PointEmission> withoutFaintest(const std::vector<PointEmission>& emi
     int keepFrom = 0;
     double sum = 0;
     while (keepFrom < kExponents && sum + byExponent[static_cast<size_t>(keepFrom)] <= fraction * total) sum += byExponent[static_cast<size_t>(keepFrom++)];
-    if (keepFrom == 0) return emissions;
-    std::vector<PointEmission> kept;
+    if (keepFrom == 0) return false;
     kept.reserve(emissions.size());
     for (const PointEmission& em : emissions) {
         if (exponentOf(em.e) >= keepFrom) kept.push_back(em);
         else ++dropped;
     }
     droppedFraction = sum / total;
-    return kept;
+    return true;
 }
 
 }  // namespace
@@ -459,8 +461,9 @@ UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<L
         halfDifference[kept++] = em;
     }
     halfDifference.resize(kept);
-    std::vector<std::vector<double>> images =
-        projector.project(withoutFaintest(emissions, model.options().dropPointsBelow, out.droppedPoints, out.droppedFraction), 1, threads, cancel);
+    std::vector<PointEmission> brighter;
+    const bool leftOut = leaveOutFaintest(emissions, model.options().dropPointsBelow, brighter, out.droppedPoints, out.droppedFraction);
+    std::vector<std::vector<double>> images = projector.project(leftOut ? brighter : emissions, 1, threads, cancel);
     if (field && !images.empty()) {
         std::vector<std::vector<double>> noise = projector.project(halfDifference, 1, threads, cancel, ProjectorParts::WithoutTail);
         if (!noise.empty()) out.fieldHalfDifference = std::move(noise[0]);

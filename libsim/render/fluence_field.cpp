@@ -438,11 +438,6 @@ bool BeamExcitationField::contains(const Vec3& y) const {
     return true;
 }
 
-double BeamExcitationField::scattered(size_t i, const Vec3& y, int half) const {
-    const BeamFluence& f = fields_.at(i);
-    return half < 0 ? f.mean.at(y) : f.half[half & 1].at(y);
-}
-
 BeamExcitationField::MeanAndHalfDifference BeamExcitationField::scatteredWithNoise(size_t i, const Vec3& y) const {
     const BeamFluence& f = fields_.at(i);
     const auto s = f.mean.stencil(y);  // the halves share the mean's box

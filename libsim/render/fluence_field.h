@@ -118,9 +118,8 @@ class BeamExcitationField final : public ExcitationField {
 public:
     explicit BeamExcitationField(std::vector<BeamFluence> fields) : fields_(std::move(fields)) {}
     std::optional<double> scatteredMeanRadiance(const Vec3& y, double lambdaNm, double coreWeight = 1, double outsideWeight = 1) const override;
-    // φ of field `i` at y (its mean or one half), W/m².
-    double scattered(size_t i, const Vec3& y, int half = -1) const;
-    // The mean and half the difference of the halves at y, from one stencil (the same values as above).
+    // φ of field `i` at y (W/m²): its mean, and half the difference of its halves (its noise), from one
+    // trilinear stencil.
     struct MeanAndHalfDifference {
         double mean = 0, halfDifference = 0;
     };

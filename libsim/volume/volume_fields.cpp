@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <string>
 #include <map>
+#include <string>
 #include <unordered_map>
 
 #include "core/errors.h"
@@ -151,12 +151,12 @@ VolumeFields::VolumeFields(std::vector<VolumeChannel> channels, const Affine& wo
     size_t mixed = 0;
     for (int32_t& b : blockEntry_)
         if (b == kMixed) b = -static_cast<int32_t>(++mixed);  // mixed block m is -(m + 1)
-    cellEntry_.assign(mixed * kBlockCells * kBlockCells * kBlockCells, 0);
+    cellEntry_.assign(mixed * kCellsPerBlock, 0);
     for (int k = 0; k < cells_[2]; ++k)
         for (int j = 0; j < cells_[1]; ++j)
             for (int i = 0; i < cells_[0]; ++i) {
                 const int32_t b = blockEntry_[blockOf(i, j, k)];
-                if (b < 0) cellEntry_[static_cast<size_t>(-b - 1) * kBlockCells * kBlockCells * kBlockCells + localCell({i, j, k})] = denseAt(i, j, k);
+                if (b < 0) cellEntry_[static_cast<size_t>(-b - 1) * kCellsPerBlock + localCell({i, j, k})] = denseAt(i, j, k);
             }
 }
 

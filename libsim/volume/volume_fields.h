@@ -72,6 +72,7 @@ public:
     // whose cells all share their maxima are crossed in one step, the others cell by cell; consecutive
     // pieces with the same maxima are merged into one segment.
     static constexpr int kBlockCells = 8;
+    static constexpr size_t kCellsPerBlock = size_t(kBlockCells) * kBlockCells * kBlockCells;
     class Traversal {
     public:
         std::optional<MajorantCellSegment> next();
@@ -113,16 +114,16 @@ private:
         return (static_cast<size_t>(c[2] & mask) * kBlockCells + static_cast<size_t>(c[1] & mask)) * kBlockCells + static_cast<size_t>(c[0] & mask);
     }
     const double* cellValues(uint32_t entry) const { return &cellMaxima_[entry * channels_.size()]; }
+    int32_t blockEntry(const std::array<int, 3>& b) const {
+        return blockEntry_[(static_cast<size_t>(b[2]) * blocks_[1] + b[1]) * blocks_[0] + static_cast<size_t>(b[0])];
+    }
     // The maxima shared by every cell of block b, or null where the block's cells differ (mixed).
     const double* blockMax(const std::array<int, 3>& b) const {
-        const int32_t e = blockEntry_[(static_cast<size_t>(b[2]) * blocks_[1] + b[1]) * blocks_[0] + static_cast<size_t>(b[0])];
+        const int32_t e = blockEntry(b);
         return e < 0 ? nullptr : cellValues(static_cast<uint32_t>(e));
     }
     // The entries of a mixed block's cells, by localCell.
-    const uint32_t* mixedCells(const std::array<int, 3>& b) const {
-        const int32_t e = blockEntry_[(static_cast<size_t>(b[2]) * blocks_[1] + b[1]) * blocks_[0] + static_cast<size_t>(b[0])];
-        return &cellEntry_[static_cast<size_t>(-e - 1) * kBlockCells * kBlockCells * kBlockCells];
-    }
+    const uint32_t* mixedCells(const std::array<int, 3>& b) const { return &cellEntry_[static_cast<size_t>(-blockEntry(b) - 1) * kCellsPerBlock]; }
 
     std::vector<VolumeChannel> channels_;
     std::optional<DensityGrid> labels_;
