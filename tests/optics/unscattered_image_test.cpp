@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <functional>
 
+#include "core/errors.h"
 #include "optics/acquisition.h"
 #include "optics/imaging.h"
 #include "optics/light_sheet.h"
@@ -152,6 +153,19 @@ TEST(UnscatteredImage, TheFaintestPointsLeftOutStayWithinTheirBudget) {
     EXPECT_LE(b.droppedFraction, 1e-3);
     // The camera sees part of what the points send, so it loses at most about the same share.
     EXPECT_LE(1 - sumB / sumA, 1e-3 * 1.5);
+}
+
+TEST(UnscatteredImage, ABadFaintPointBudgetIsRefusedByName) {
+    for (double bad : {-1e-4, 0.5, std::nan("")}) {
+        optics::UnscatteredOptions u;
+        u.dropPointsBelow = bad;
+        try {
+            u.validate();
+            ADD_FAILURE() << "no error for " << bad;
+        } catch (const ConfigError& e) {
+            EXPECT_NE(std::string(e.what()).find("dropPointsBelow must lie in [0, 0.01]"), std::string::npos) << e.what();
+        }
+    }
 }
 
 // A PSF narrower than a pixel (NA 0.5 at 1.5 µm object pixels: 2.4 cycles of its band per pixel)

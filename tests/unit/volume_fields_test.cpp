@@ -123,6 +123,21 @@ TEST(MajorantGrid, EmptyAndUniformRunsAreOneSegment) {
     EXPECT_LE(throughDye, 12);
 }
 
+TEST(MajorantGrid, BadOptionsAreRefusedByName) {
+    const auto message = [](MajorantGridOptions o) {
+        try {
+            o.validate();
+        } catch (const ConfigError& e) {
+            return std::string(e.what());
+        }
+        return std::string("(no error)");
+    };
+    EXPECT_NE(message({-2}).find("majorant cell size must be >= 1 voxel"), std::string::npos);
+    EXPECT_NE(message({0, 0}).find("majorant target cell count must lie in [1, 1024], got 0"), std::string::npos);
+    EXPECT_NE(message({0, 64, 0}).find("majorant cell cap must be >= 1, got 0"), std::string::npos);
+    EXPECT_EQ(message({}), "(no error)");
+}
+
 TEST(MajorantGrid, AllZeroGridHasNoDomain) {
     const DensityGrid g = DensityGrid::fromVoxels("zero", {{0, 0, 0}, {9, 9, 9}}, voxels(0.1), [](int, int, int) { return 0.0; });
     std::vector<VolumeChannel> ch(1);
