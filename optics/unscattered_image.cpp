@@ -61,7 +61,9 @@ EmissionPoints::EmissionPoints(const Imaging& plane, double x0, double yTop, dou
     : right_(plane.world(1, 0, 0) - plane.world(0, 0, 0)), up_(plane.world(0, 1, 0) - plane.world(0, 0, 0)), axis_(plane.axis()),
       centre_(plane.centre()), x0_(x0), yTop_(yTop), z0_(z0), lateral_(lateralMm), axial_(axialMm) {}
 
-uint64_t EmissionPoints::key(int64_t i, int64_t j, int64_t l) const { return packKey(i, j, l); }
+// Layer first, then row and column: the lattice's own order (by z, then y, then x), so that a plane's
+// cells usually arrive sorted.
+uint64_t EmissionPoints::key(int64_t i, int64_t j, int64_t l) const { return packKey(l, j, i); }
 
 void EmissionPoints::add(int64_t i, int64_t j, int64_t layer, double power) {
     if (power > 0) pending_.push_back({key(i, j, layer), power});
@@ -69,7 +71,8 @@ void EmissionPoints::add(int64_t i, int64_t j, int64_t layer, double power) {
 
 void EmissionPoints::finish() {
     // Cells sorted by key, their powers summed; the cdf over them, each cell's power kept for pdf().
-    std::sort(pending_.begin(), pending_.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    const auto byKey = [](const auto& a, const auto& b) { return a.first < b.first; };
+    if (!std::is_sorted(pending_.begin(), pending_.end(), byKey)) std::stable_sort(pending_.begin(), pending_.end(), byKey);
     cells_.clear();
     power_.clear();
     for (const auto& [k, v] : pending_) {
@@ -88,8 +91,8 @@ void EmissionPoints::finish() {
 EmissionPoints::Sample EmissionPoints::sample(double uCell, double ux, double uy, double uz) const {
     const size_t n = std::min(cells_.size() - 1, static_cast<size_t>(std::upper_bound(cdf_.begin(), cdf_.end(), uCell * total_) - cdf_.begin()));
     const uint64_t k = cells_[n];
-    const int64_t i = static_cast<int64_t>(k >> 42) - (1 << 20), j = static_cast<int64_t>((k >> 21) & 0x1FFFFF) - (1 << 20),
-                  l = static_cast<int64_t>(k & 0x1FFFFF) - (1 << 20);
+    const int64_t l = static_cast<int64_t>(k >> 42) - (1 << 20), j = static_cast<int64_t>((k >> 21) & 0x1FFFFF) - (1 << 20),
+                  i = static_cast<int64_t>(k & 0x1FFFFF) - (1 << 20);
     const double x = x0_ + (static_cast<double>(i) + ux) * lateral_, y = yTop_ - (static_cast<double>(j) + uy) * lateral_,
                  z = z0_ + (static_cast<double>(l) + uz) * axial_;
     return {centre_ + right_ * x + up_ * y + axis_ * z, power_[n] / total_ / (lateral_ * lateral_ * axial_)};
@@ -334,31 +337,51 @@ std::vector<PointEmission> planeEmissions(const UnscatteredModel& model, const E
     EmissionGains::FieldGains fieldGains;
     gains.planeGains(lights, planeOffsetMm, first, last, gain, threads, field, fieldEmissions ? &fieldGains : nullptr);
     const int slots = lattice.slots();
-    std::vector<PointEmission> out;
-    if (fieldEmissions) fieldEmissions->clear();
-    for (size_t p = first; p < last; ++p) {
-        const LatticePoint& q = lattice.point(p);
-        PointEmission em = pointEmission(g, q, planeOffsetMm);
-        const int firstDye = model.dyes().firstOfMedium[static_cast<size_t>(q.medium)];
-        for (int slot = 0; slot < slots; ++slot) {
-            const size_t at = (p - first) * static_cast<size_t>(slots) + static_cast<size_t>(slot);
-            const double c = lattice.concentration(p, slot);
-            const double e = gain[at] * c;
-            if (!(e > 0)) continue;
-            em.e = e;
-            em.dye = static_cast<uint32_t>(firstDye + slot);
-            em.target = 0;
-            out.push_back(em);
-            if (fieldEmissions && fieldGains.scattered[at] > 0) {
-                PointEmission part = em;
-                part.e = fieldGains.scattered[at] * c;
-                fieldEmissions->push_back(part);
-                part.e = fieldGains.halfDifference[at] * c;
-                part.target = 1;
-                if (part.e != 0) fieldEmissions->push_back(part);
+    // In chunks of points, each filled on its own and joined in order: the same list whatever the threads.
+    constexpr size_t kChunkPoints = 16384;
+    const size_t chunks = (last - first + kChunkPoints - 1) / kChunkPoints;
+    std::vector<std::vector<PointEmission>> parts(chunks), fieldChunks(fieldEmissions ? chunks : 0);
+    parallelFor(chunks, threads, [&](size_t chunk) {
+        std::vector<PointEmission>& part = parts[chunk];
+        const size_t begin = first + chunk * kChunkPoints, end = std::min(last, begin + kChunkPoints);
+        part.reserve((end - begin) * static_cast<size_t>(slots));
+        for (size_t p = begin; p < end; ++p) {
+            const LatticePoint& q = lattice.point(p);
+            PointEmission em = pointEmission(g, q, planeOffsetMm);
+            const int firstDye = model.dyes().firstOfMedium[static_cast<size_t>(q.medium)];
+            for (int slot = 0; slot < slots; ++slot) {
+                const size_t at = (p - first) * static_cast<size_t>(slots) + static_cast<size_t>(slot);
+                const double c = lattice.concentration(p, slot);
+                const double e = gain[at] * c;
+                if (!(e > 0)) continue;
+                em.e = e;
+                em.dye = static_cast<uint32_t>(firstDye + slot);
+                em.target = 0;
+                part.push_back(em);
+                if (fieldEmissions && fieldGains.scattered[at] > 0) {
+                    PointEmission scattered = em;
+                    scattered.e = fieldGains.scattered[at] * c;
+                    fieldChunks[chunk].push_back(scattered);
+                    scattered.e = fieldGains.halfDifference[at] * c;
+                    scattered.target = 1;
+                    if (scattered.e != 0) fieldChunks[chunk].push_back(scattered);
+                }
             }
         }
-    }
+    });
+    const auto join = [](std::vector<std::vector<PointEmission>>& pieces) {
+        size_t total = 0;
+        for (const auto& piece : pieces) total += piece.size();
+        std::vector<PointEmission> joined;
+        joined.reserve(total);
+        for (auto& piece : pieces) {
+            joined.insert(joined.end(), piece.begin(), piece.end());
+            piece = {};
+        }
+        return joined;
+    };
+    std::vector<PointEmission> out = join(parts);
+    if (fieldEmissions) *fieldEmissions = join(fieldChunks);
     return out;
 }
 
@@ -430,37 +453,55 @@ UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<L
     // lies matters to its image, little to the size of the noise: the summary's field noise moved 4 % on
     // the README job's first plane against gathering in pixels alone).
     constexpr int kFieldNoiseLayers = 4;
-    const double lastLayer = model.geometry().planeLayers - 1;
+    const LatticeGeometry& g = model.geometry();
+    const double lastLayer = g.planeLayers - 1;
     double fieldEmitted = 0, emitted = 0;
     for (const PointEmission& em : emissions) emitted += em.e;
     std::vector<PointEmission> halfDifference;
-    for (PointEmission em : fieldParts) {
-        if (em.target == 0) {
-            fieldEmitted += em.e;
-            continue;
-        }
-        em.target = 0;
-        em.u = std::floor(em.u) + 0.5;
-        em.v = std::floor(em.v) + 0.5;
-        em.layer = std::min(lastLayer, std::floor(std::max(0.0, em.layer) / kFieldNoiseLayers) * kFieldNoiseLayers + kFieldNoiseLayers / 2);
-        halfDifference.push_back(em);
-    }
-    std::sort(halfDifference.begin(), halfDifference.end(), [](const PointEmission& a, const PointEmission& b) {
-        return std::tie(a.v, a.u, a.layer, a.dye) < std::tie(b.v, b.u, b.layer, b.dye);
-    });
-    size_t kept = 0;
-    for (size_t i = 0; i < halfDifference.size(); ++i) {
-        const PointEmission& em = halfDifference[i];
-        if (kept > 0) {
-            PointEmission& last = halfDifference[kept - 1];
-            if (last.u == em.u && last.v == em.v && last.layer == em.layer && last.dye == em.dye) {
-                last.e += em.e;
+    {
+        // The points arrive by layer (the lattice's order), so each group of layers is gathered on a dense
+        // image of the region per dye and flushed by pixel when the next group begins.
+        const int64_t W = g.regionWidth(), H = g.regionHeight(), D = static_cast<int64_t>(model.dyes().dyes.size());
+        std::vector<double> sum(static_cast<size_t>(W * H * D), 0.0);
+        std::vector<uint8_t> seen(sum.size(), 0);
+        std::vector<uint32_t> touched;
+        int64_t group = -1;
+        const auto flush = [&] {
+            std::sort(touched.begin(), touched.end());
+            for (uint32_t index : touched) {
+                PointEmission em;
+                em.dye = static_cast<uint32_t>(index % D);
+                em.u = static_cast<double>((index / D) % W) + 0.5;
+                em.v = static_cast<double>(index / D / W) + 0.5;
+                em.layer = std::min(lastLayer, static_cast<double>(group * kFieldNoiseLayers + kFieldNoiseLayers / 2));
+                em.e = sum[index];
+                halfDifference.push_back(em);
+                sum[index] = 0;
+                seen[index] = 0;
+            }
+            touched.clear();
+        };
+        for (const PointEmission& em : fieldParts) {
+            if (em.target == 0) {
+                fieldEmitted += em.e;
                 continue;
             }
+            const int64_t px = static_cast<int64_t>(std::floor(em.u)), py = static_cast<int64_t>(std::floor(em.v));
+            const int64_t layerGroup = static_cast<int64_t>(std::floor(std::max(0.0, em.layer) / kFieldNoiseLayers));
+            if (px < 0 || px >= W || py < 0 || py >= H || em.dye >= D) continue;  // the lattice lies within the region
+            if (layerGroup != group) {
+                flush();
+                group = layerGroup;
+            }
+            const size_t index = static_cast<size_t>((py * W + px) * D + em.dye);
+            if (!seen[index]) {
+                seen[index] = 1;
+                touched.push_back(static_cast<uint32_t>(index));
+            }
+            sum[index] += em.e;
         }
-        halfDifference[kept++] = em;
+        flush();
     }
-    halfDifference.resize(kept);
     std::vector<PointEmission> brighter;
     const bool leftOut = leaveOutFaintest(emissions, model.options().dropPointsBelow, brighter, out.droppedPoints, out.droppedFraction);
     std::vector<std::vector<double>> images = projector.project(leftOut ? brighter : emissions, 1, threads, cancel);
@@ -483,7 +524,6 @@ UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<L
         out.fieldElectrons = total * fieldEmitted / emitted;
     }
 
-    const LatticeGeometry& g = model.geometry();
     auto emission = std::make_shared<EmissionPoints>(plane, g.xLeft(), g.yTop(), -g.halfDepthMm(), g.lateralMm(), g.axialMm);
     for (const PointEmission& em : emissions)
         emission->add(static_cast<int64_t>(std::floor(em.u * g.lateralSamples)), static_cast<int64_t>(std::floor(em.v * g.lateralSamples)),
