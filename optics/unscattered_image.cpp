@@ -61,9 +61,7 @@ EmissionPoints::EmissionPoints(const Imaging& plane, double x0, double yTop, dou
     : right_(plane.world(1, 0, 0) - plane.world(0, 0, 0)), up_(plane.world(0, 1, 0) - plane.world(0, 0, 0)), axis_(plane.axis()),
       centre_(plane.centre()), x0_(x0), yTop_(yTop), z0_(z0), lateral_(lateralMm), axial_(axialMm) {}
 
-// Layer first, then row and column: the lattice's own order (by z, then y, then x), so that a plane's
-// cells usually arrive sorted.
-uint64_t EmissionPoints::key(int64_t i, int64_t j, int64_t l) const { return packKey(l, j, i); }
+uint64_t EmissionPoints::key(int64_t i, int64_t j, int64_t l) const { return packKey(i, j, l); }
 
 void EmissionPoints::add(int64_t i, int64_t j, int64_t layer, double power) {
     if (power > 0) pending_.push_back({key(i, j, layer), power});
@@ -71,8 +69,7 @@ void EmissionPoints::add(int64_t i, int64_t j, int64_t layer, double power) {
 
 void EmissionPoints::finish() {
     // Cells sorted by key, their powers summed; the cdf over them, each cell's power kept for pdf().
-    const auto byKey = [](const auto& a, const auto& b) { return a.first < b.first; };
-    if (!std::is_sorted(pending_.begin(), pending_.end(), byKey)) std::stable_sort(pending_.begin(), pending_.end(), byKey);
+    std::sort(pending_.begin(), pending_.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     cells_.clear();
     power_.clear();
     for (const auto& [k, v] : pending_) {
@@ -91,8 +88,8 @@ void EmissionPoints::finish() {
 EmissionPoints::Sample EmissionPoints::sample(double uCell, double ux, double uy, double uz) const {
     const size_t n = std::min(cells_.size() - 1, static_cast<size_t>(std::upper_bound(cdf_.begin(), cdf_.end(), uCell * total_) - cdf_.begin()));
     const uint64_t k = cells_[n];
-    const int64_t l = static_cast<int64_t>(k >> 42) - (1 << 20), j = static_cast<int64_t>((k >> 21) & 0x1FFFFF) - (1 << 20),
-                  i = static_cast<int64_t>(k & 0x1FFFFF) - (1 << 20);
+    const int64_t i = static_cast<int64_t>(k >> 42) - (1 << 20), j = static_cast<int64_t>((k >> 21) & 0x1FFFFF) - (1 << 20),
+                  l = static_cast<int64_t>(k & 0x1FFFFF) - (1 << 20);
     const double x = x0_ + (static_cast<double>(i) + ux) * lateral_, y = yTop_ - (static_cast<double>(j) + uy) * lateral_,
                  z = z0_ + (static_cast<double>(l) + uz) * axial_;
     return {centre_ + right_ * x + up_ * y + axis_ * z, power_[n] / total_ / (lateral_ * lateral_ * axial_)};
