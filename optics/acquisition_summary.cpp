@@ -23,6 +23,19 @@ std::string formatted(const char* format, auto... args) {
 
 }  // namespace
 
+AcquisitionSummary::Saturation AcquisitionSummary::saturation(const Stack& stack, double fullWellElectrons) {
+    Saturation out;
+    for (size_t i = 0; i < stack.expected.size(); ++i) {
+        const float e = stack.expected[i];
+        out.brightest = std::max(out.brightest, double(e));
+        if (e > fullWellElectrons) {
+            ++out.pixels;
+            if (e - 4 * stack.stderrElectrons[i] < fullWellElectrons) ++out.monteCarlo;
+        }
+    }
+    return out;
+}
+
 AcquisitionSummary::AcquisitionSummary(const Microscope& m, const Stack& stack, const AcquireOptions& options)
     : options_(options), darkElectrons_(m.detector.darkCurrentElectronsPerS * m.detector.exposureS), readNoise_(m.detector.readNoiseElectrons) {
     for (size_t c : stack.channels) channelNames_.push_back(m.channels[c].name);
@@ -74,6 +87,7 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
                                                                    int ranks) const {
     float maxE = 0;
     for (float e : stack.expected) maxE = std::max(maxE, e);
+    const Saturation sat = saturation(stack, m.detector.fullWellElectrons);
     const double total = std::max(1e-300, computedSum_ + pathSum_);
     const auto perPath = [&](uint64_t n) { return double(n) / std::max<double>(1.0, double(stats_.paths)); };
     const double vertices = perPath(stats_.scatteringEvents + stats_.surfaceBounces);
@@ -124,6 +138,10 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
         {"", "truncated_paths", double(stats_.truncated), false, true},
         {"", "largest_sample_electrons", largest_},
         {"", "max_expected_electrons", double(maxE)},
+        // Pixels expecting more than the full well, and of them those within 4 standard errors of it (Monte
+        // Carlo outliers rather than light the exposure puts there).
+        {"", "saturated_pixels", double(sat.pixels), false, true},
+        {"", "saturated_monte_carlo_pixels", double(sat.monteCarlo), false, true},
         {"", "full_well_electrons", m.detector.fullWellElectrons},
         {"", "exposure_s", m.detector.exposureS},
     };
@@ -146,22 +164,17 @@ std::vector<std::string> AcquisitionSummary::warnings(const Stack& stack, const 
                                 "of pixels, as a ratio of standard deviations), at %.3g paths per pixel on average (--max-spp %d)",
                                 *options_.noiseRatio, std::sqrt(mcOverCameraMedian), double(pathSamples_) / std::max<double>(1.0, double(pixels_)),
                                 options_.maxSpp));
-    float maxE = 0;
-    size_t saturated = 0, saturatedOutliers = 0;  // above the full well; of those, within 4 standard errors of it
-    for (size_t i = 0; i < stack.expected.size(); ++i) {
-        const float e = stack.expected[i];
-        maxE = std::max(maxE, e);
-        if (e > m.detector.fullWellElectrons) {
-            ++saturated;
-            if (e - 4 * stack.stderrElectrons[i] < m.detector.fullWellElectrons) ++saturatedOutliers;
-        }
+    const Saturation sat = saturation(stack, m.detector.fullWellElectrons);
+    if (sat.pixels > 0) {
+        std::string which;
+        if (sat.monteCarlo == sat.pixels)
+            which = "; each is within 4 Monte Carlo standard errors of the full well (rare large samples: more paths, not less exposure, may be "
+                    "what they need)";
+        else if (sat.monteCarlo > 0)
+            which = formatted("; %zu of them lie within 4 Monte Carlo standard errors of it (they may be Monte Carlo noise)", sat.monteCarlo);
+        out.push_back(formatted("%zu of %zu pixels expect more than the full well (%.3g e-; brightest %.3g e-): the camera saturates there%s", sat.pixels,
+                                stack.expected.size(), m.detector.fullWellElectrons, sat.brightest, which.c_str()));
     }
-    if (saturated > 0)
-        out.push_back(formatted("%zu of %zu pixels expect more than the full well (%.3g e-; brightest %.3g e-): the camera saturates there%s", saturated,
-                                stack.expected.size(), m.detector.fullWellElectrons, double(maxE),
-                                saturatedOutliers == saturated ? "; each is within 4 Monte Carlo standard errors of the full well (rare large "
-                                                                 "samples: more paths, not less exposure, may be what they need)"
-                                                               : ""));
     return out;
 }
 

@@ -32,6 +32,14 @@ public:
     // Warnings about the finished stack: a missed noise target, pixels expecting more than the full well.
     std::vector<std::string> warnings(const Stack& stack, const Microscope& microscope) const;
 
+    // Pixels of the stack expecting more than the full well; of them, those within 4 Monte Carlo standard
+    // errors of it.
+    struct Saturation {
+        size_t pixels = 0, monteCarlo = 0;
+        double brightest = 0;
+    };
+    static Saturation saturation(const Stack& stack, double fullWellElectrons);
+
 private:
     AcquireOptions options_;
     double darkElectrons_, readNoise_;
