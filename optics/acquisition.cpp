@@ -207,44 +207,6 @@ std::vector<double> poolImage(const std::vector<double>& image, int width, int h
     return out;
 }
 
-// The plane's excitation field over the computed region (and out to the options' depth), for a channel
-// lit only by beams with lines in a scene where something scatters; null otherwise.
-std::unique_ptr<const BeamExcitationField> traceExcitationField(const Scene& scene, const PathTracer& tracer, const Imaging& imaging,
-                                                               const UnscatteredModel& model, const AcquireOptions& o, uint64_t streamKey) {
-    if (o.field.photons == 0 || tracer.fluorescence().model() != FluorescenceModel::Full) return nullptr;
-    const std::vector<BeamLineSide> lines = beamLineSides(tracer.lights());
-    if (lines.empty()) return nullptr;
-    // Something must scatter at a line for the field to hold any light.
-    const bool scatters = std::any_of(scene.media.begin(), scene.media.end(), [&](const Medium& m) {
-        return !m.isVacuumLike() && m.channelMax()[kScatteringChannel] > 0 &&
-               std::any_of(lines.begin(), lines.end(), [&](const BeamLineSide& l) { return m.scatteringAt(l.lambdaNm) > 0; });
-    });
-    if (!scatters) return nullptr;
-    for (const BeamLineSide& l : lines)
-        if (!l.profile->axisPoint()) return nullptr;
-    const LatticeGeometry& g = model.geometry();
-    FieldBox box;
-    box.centre = imaging.centre();
-    box.right = imaging.world(1, 0, 0) - imaging.world(0, 0, 0);
-    box.axis = imaging.axis();
-    box.up = imaging.world(0, 1, 0) - imaging.world(0, 0, 0);
-    box.halfX = 0.5 * g.regionWidth() * g.pixelMm;
-    box.halfY = 0.5 * g.regionHeight() * g.pixelMm;
-    box.halfZ = std::max(g.halfDepthMm(), o.field.halfDepthUm * 1e-3);
-    box.hx = box.hy = o.field.lateralUm * 1e-3;
-    box.hz = o.field.axialUm * 1e-3;
-    FluenceOptions fo;
-    fo.photons = o.field.photons;
-    fo.seed = mixBits(o.seed + mixBits(streamKey + 0x6669656c64ULL));
-    fo.threads = o.threads;
-    std::vector<BeamFluence> fields;
-    for (const BeamLineSide& l : lines) {
-        fields.push_back(traceBeamFluence(scene, l, box, fo, o.cancel));
-        if (!fields.back().stats.complete) break;
-    }
-    return std::make_unique<const BeamExcitationField>(std::move(fields));
-}
-
 PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const ObjectiveOptions& objective, const FocalPlane& focus,
                       const Filter& emission, const DetectorOptions& detector, int width, int height, uint64_t streamKey,
                       const AcquireOptions& o, const ChannelImaging& channel) {
@@ -515,6 +477,42 @@ const std::shared_ptr<const WidefieldPsf>& ChannelImaging::psfAt(const FocalPlan
         for (size_t i = 0; i < planeOffsetsMm.size(); ++i)
             if (std::abs(planeOffsetsMm[i] - offset) <= 1e-9) return planePsfs[i];
     return psf;
+}
+
+std::unique_ptr<const BeamExcitationField> traceExcitationField(const Scene& scene, const PathTracer& tracer, const Imaging& imaging,
+                                                               const UnscatteredModel& model, const AcquireOptions& o, uint64_t streamKey) {
+    if (o.field.photons == 0 || tracer.fluorescence().model() != FluorescenceModel::Full) return nullptr;
+    const std::vector<BeamLineSide> lines = beamLineSides(tracer.lights());
+    if (lines.empty()) return nullptr;
+    // Something must scatter at a line for the field to hold any light.
+    const bool scatters = std::any_of(scene.media.begin(), scene.media.end(), [&](const Medium& m) {
+        return !m.isVacuumLike() && m.channelMax()[kScatteringChannel] > 0 &&
+               std::any_of(lines.begin(), lines.end(), [&](const BeamLineSide& l) { return m.scatteringAt(l.lambdaNm) > 0; });
+    });
+    if (!scatters) return nullptr;
+    for (const BeamLineSide& l : lines)
+        if (!l.profile->axisPoint()) return nullptr;
+    const LatticeGeometry& g = model.geometry();
+    FieldBox box;
+    box.centre = imaging.centre();
+    box.right = imaging.world(1, 0, 0) - imaging.world(0, 0, 0);
+    box.axis = imaging.axis();
+    box.up = imaging.world(0, 1, 0) - imaging.world(0, 0, 0);
+    box.halfX = 0.5 * g.regionWidth() * g.pixelMm;
+    box.halfY = 0.5 * g.regionHeight() * g.pixelMm;
+    box.halfZ = std::max(g.halfDepthMm(), o.field.halfDepthUm * 1e-3);
+    box.hx = box.hy = o.field.lateralUm * 1e-3;
+    box.hz = o.field.axialUm * 1e-3;
+    FluenceOptions fo;
+    fo.photons = o.field.photons;
+    fo.seed = mixBits(o.seed + mixBits(streamKey + 0x6669656c64ULL));
+    fo.threads = o.threads;
+    std::vector<BeamFluence> fields;
+    for (const BeamLineSide& l : lines) {
+        fields.push_back(traceBeamFluence(scene, l, box, fo, o.cancel));
+        if (!fields.back().stats.complete) break;
+    }
+    return std::make_unique<const BeamExcitationField>(std::move(fields));
 }
 
 PlaneImage renderPlane(const Scene& scene, std::vector<Light> lights, const ObjectiveOptions& objective, const FocalPlane& focus,

@@ -26,6 +26,7 @@
 #include "optics/imaging.h"
 #include "optics/microscope.h"
 #include "optics/unscattered_image.h"
+#include "render/fluence_field.h"
 #include "render/path_tracer.h"
 
 namespace fluorosim::optics {
@@ -128,6 +129,12 @@ struct ChannelImaging {
 ChannelImaging setUpChannelImaging(const Scene& scene, const std::vector<Light>& lights, const ObjectiveOptions& objective, const FocalPlane& focus,
                                    const Filter& emission, const DetectorOptions& detector, int width, int height, const AcquireOptions& options,
                                    std::vector<double> planeOffsetsMm = {0.0}, bool labels = false);
+
+// The plane's excitation field (render/fluence_field.h) over the computed region and out to the options'
+// depth, traced with the plane's stream key: null when options.field.photons is 0, when the tracer's
+// lights hold no beam line, or when nothing in the scene scatters at its lines.
+std::unique_ptr<const BeamExcitationField> traceExcitationField(const Scene& scene, const PathTracer& tracer, const Imaging& imaging,
+                                                               const UnscatteredModel& model, const AcquireOptions& options, uint64_t streamKey);
 
 // Expected photoelectrons of one image with the given lights, focal plane, filter and detector. Without
 // `channel`, the PSF and the computed part's model are built for this plane alone.

@@ -394,9 +394,8 @@ std::vector<double> scatteredLight(const Scene& scene, const Microscope& m, cons
     std::vector<double> out(stackPixels, 0.0);
     AcquireOptions a = o.acquisition;
     a.estimator = Estimator::Split;
-    // The operator's columns hold the unscattered image only, so the paths carry all the rest here,
-    // scattered excitation included (no excitation field).
-    a.field.photons = 0;
+    // The operator's columns hold the computed image (the unscattered light and the excitation field's
+    // emission), so the paths carry the rest here.
     a.spp = o.scatteredSpp;
     a.noiseRatio.reset();
     a.progress = nullptr;
@@ -432,7 +431,6 @@ LabelledScatter scatteredByLabel(const Scene& scene, const Microscope& m, const 
     out.perKey.assign(keys.size(), std::vector<double>(stackPixels, 0.0));
     AcquireOptions a = o.acquisition;
     a.estimator = Estimator::Split;
-    a.field.photons = 0;  // as in scatteredLight
     a.spp = o.scatteredSpp;
     a.noiseRatio.reset();
     a.progress = nullptr;

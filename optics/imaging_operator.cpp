@@ -154,20 +154,30 @@ void ParameterMap::entries(const EmissionLattice& lattice, size_t p, std::vector
 
 struct StackOperator::Channel {
     size_t microscopeChannel = 0;
+    std::string name;
     ChannelImaging imaging;
     std::vector<std::vector<Light>> planeLights;
     const EmissionLattice* lattice = nullptr;
     std::unique_ptr<EmissionGains> gains;
+    // Per plane, the beams' scattered excitation (null where there is none), traced as the acquisition
+    // traces it (same stream): its emission is part of each column, as it is of the computed image.
+    std::vector<std::unique_ptr<const BeamExcitationField>> fields;
 };
 
 StackOperator::StackOperator(const Scene& scene, const Microscope& m, std::vector<size_t> channels, const AcquireOptions& options)
-    : scene_(scene), width_(m.width), height_(m.height), planes_(m.stack.planes), threads_(options.threads) {
+    : scene_(scene), width_(m.width), height_(m.height), planes_(m.stack.planes), threads_(options.threads), options_(options), objective_(m.objective),
+      detector_(m.detector) {
     AcquireOptions o = options;
     o.estimator = Estimator::Split;
-    for (int k = 0; k < planes_; ++k) offsets_.push_back(m.planeOffsetMm(k));
+    options_.estimator = Estimator::Split;
+    for (int k = 0; k < planes_; ++k) {
+        offsets_.push_back(m.planeOffsetMm(k));
+        focalPlanes_.push_back(m.focalPlaneAt(offsets_.back()));
+    }
     for (size_t c : channels) {
         auto ch = std::make_unique<Channel>();
         ch->microscopeChannel = c;
+        ch->name = m.channels[c].name;
         ch->imaging = setUpChannelImaging(scene, m, c, o, true);
         for (int k = 0; k < planes_; ++k) ch->planeLights.push_back(m.lightsAt(scene, m.channels[c], offsets_[static_cast<size_t>(k)]));
         if (ch->imaging.unscattered && ch->imaging.unscattered->active()) {
@@ -208,6 +218,16 @@ bool StackOperator::refreshGains(const Scene& scene, const std::atomic<bool>* ca
         auto g = ch->imaging.unscattered->gainsFor(scene, threads_, cancel);
         if (!g) return false;
         ch->gains = std::move(g);
+        ch->fields.clear();
+        for (int k = 0; k < planes_; ++k) {
+            const PathTracer tracer(scene, ch->planeLights[static_cast<size_t>(k)]);
+            const FocalPlane& focus = focalPlanes_[static_cast<size_t>(k)];
+            const Imaging imaging(objective_, focus, detector_, width_, height_, ch->imaging.psfAt(focus));
+            AcquireOptions o = options_;
+            o.cancel = cancel;
+            ch->fields.push_back(traceExcitationField(scene, tracer, imaging, *ch->imaging.unscattered, o, planeStreamKey(ch->name, k)));
+            if (cancel && cancel->load()) return false;
+        }
     }
     gainSeconds_ += secondsSince(start);
     return true;
@@ -223,11 +243,11 @@ struct PlaneTerms {
 };
 
 PlaneTerms planeTerms(const UnscatteredModel& model, const EmissionLattice& lattice, const EmissionGains& gains, const std::vector<Light>& lights,
-                      double offset, const ParameterMap& map, int threads) {
+                      double offset, const ParameterMap& map, int threads, const BeamExcitationField* field) {
     const LatticeGeometry& g = model.geometry();
     const auto [first, last] = lattice.zRange(offset - g.halfDepthMm(), offset + g.halfDepthMm());
     std::vector<double> gain;
-    gains.planeGains(lights, offset, first, last, gain, threads);
+    gains.planeGains(lights, offset, first, last, gain, threads, field);
     PlaneTerms t;
     const int slots = lattice.slots();
     std::vector<ParameterMap::Entry> entries;
@@ -272,7 +292,7 @@ SparseColumns StackOperator::columns(const ParameterMap& map, const std::atomic<
             if (cancel && cancel->load()) throw Cancelled("cancelled while computing the fit's columns");
             const auto start = std::chrono::steady_clock::now();
             const PlaneTerms terms = planeTerms(*ch.imaging.unscattered, *ch.lattice, *ch.gains, ch.planeLights[static_cast<size_t>(k)],
-                                                offsets_[static_cast<size_t>(k)], map, threads_);
+                                                offsets_[static_cast<size_t>(k)], map, threads_, ch.fields.empty() ? nullptr : ch.fields[static_cast<size_t>(k)].get());
             const size_t base = planeImage(slot, k) * planePixels;
             for (size_t b0 = 0; b0 < map.size(); b0 += batch) {
                 const size_t b1 = std::min(map.size(), b0 + batch);
@@ -330,7 +350,7 @@ std::vector<double> StackOperator::applyParts(const ParameterMap& map, const std
         for (int k = 0; k < planes_; ++k) {
             const auto start = std::chrono::steady_clock::now();
             PlaneTerms terms = planeTerms(*ch.imaging.unscattered, *ch.lattice, *ch.gains, ch.planeLights[static_cast<size_t>(k)],
-                                          offsets_[static_cast<size_t>(k)], map, threads_);
+                                          offsets_[static_cast<size_t>(k)], map, threads_, ch.fields.empty() ? nullptr : ch.fields[static_cast<size_t>(k)].get());
             for (size_t i = 0; i < terms.emissions.size(); ++i) {
                 double c = 0;
                 for (uint32_t e = terms.entryStart[i]; e < terms.entryStart[i + 1]; ++e) {
@@ -361,7 +381,7 @@ std::vector<double> StackOperator::applyAdjoint(const ParameterMap& map, const s
         for (int k = 0; k < planes_; ++k) {
             const auto start = std::chrono::steady_clock::now();
             const PlaneTerms terms = planeTerms(*ch.imaging.unscattered, *ch.lattice, *ch.gains, ch.planeLights[static_cast<size_t>(k)],
-                                                offsets_[static_cast<size_t>(k)], map, threads_);
+                                                offsets_[static_cast<size_t>(k)], map, threads_, ch.fields.empty() ? nullptr : ch.fields[static_cast<size_t>(k)].get());
             const std::vector<double> image(y.begin() + static_cast<std::ptrdiff_t>(planeImage(slot, k) * planePixels),
                                             y.begin() + static_cast<std::ptrdiff_t>((planeImage(slot, k) + 1) * planePixels));
             const std::vector<double> sensitivity = ch.imaging.unscattered->projector(offsets_[static_cast<size_t>(k)]).backProject(image, terms.emissions, threads_);

@@ -93,8 +93,9 @@ public:
     std::vector<const EmissionLattice*> lattices() const;
     const UnscatteredModel& model(size_t channelSlot) const;
 
-    // g at `scene`'s concentrations (the same scene, rescaled): the attenuation the next columns and
-    // products freeze. Returns false when cancelled.
+    // g at `scene`'s concentrations (the same scene, rescaled), and each plane's excitation field traced in
+    // it (as the acquisition traces it, with the same streams): the attenuation and scattered excitation the
+    // next columns and products freeze. Returns false when cancelled.
     bool refreshGains(const Scene& scene, const std::atomic<bool>* cancel = nullptr);
 
     // A's columns. Without `withTail` they leave out the PSF's tail beyond its cut: the tail reaches every
@@ -119,7 +120,11 @@ private:
     const Scene& scene_;
     int width_ = 0, height_ = 0, planes_ = 0;
     std::vector<double> offsets_;
+    std::vector<FocalPlane> focalPlanes_;
     int threads_ = 0;
+    AcquireOptions options_;  // the acquisition the operator models (its field options, seed and threads)
+    ObjectiveOptions objective_;
+    DetectorOptions detector_;
     mutable double gainSeconds_ = 0, projectionSeconds_ = 0;
     mutable int projections_ = 0;
 };

@@ -145,8 +145,12 @@ TEST(StackOperator, AdjointPassesTheDotProductTestForLabelsAndGrid) {
     }
 }
 
-TEST(StackOperator, LabelColumnsAddUpToTheAcquisitionsComputedImage) {
-    FitSpecimen s;
+// The columns add up to the acquisition's computed image: in clear tissue the unscattered light, in
+// scattering tissue also the emission of the excitation field, traced with the acquisition's streams.
+void expectColumnsAddUpToTheComputedImage(double sigmaSPerMm) {
+    testing::FitSceneOptions so;
+    so.sigmaSPerMm = sigmaSPerMm;
+    FitSpecimen s(so);
     optics::AcquireOptions o;
     optics::StackOperator op(s.scene, s.microscope, {0, 1}, o);
     ASSERT_TRUE(op.refreshGains(s.scene));
@@ -168,7 +172,7 @@ TEST(StackOperator, LabelColumnsAddUpToTheAcquisitionsComputedImage) {
     const std::vector<double> applied = op.apply(map, std::vector<double>(map.size(), 1.0));
     // The acquisition's computed part, plane by plane (its own lattice, not split by label).
     const size_t planePixels = static_cast<size_t>(op.width()) * op.height();
-    double worstColumns = 0, worstAcquisition = 0, peak = 0;
+    double worstColumns = 0, worstAcquisition = 0, peak = 0, fieldElectrons = 0, computedElectrons = 0;
     // The operator leaves no faint point out; the acquisition by default leaves out 1e-4 of what they send.
     optics::AcquireOptions exact = o;
     exact.unscattered.dropPointsBelow = 0;
@@ -180,20 +184,43 @@ TEST(StackOperator, LabelColumnsAddUpToTheAcquisitionsComputedImage) {
                 a.spp = 1;
                 return a;
             }(), &imaging);
+            fieldElectrons += image.fieldElectrons;
             for (size_t i = 0; i < planePixels; ++i) {
                 const size_t at = op.planeImage(slot, k) * planePixels + i;
+                computedElectrons += image.computedImage[i];
                 peak = std::max(peak, applied[at]);
                 worstColumns = std::max({worstColumns, std::abs(sum[at] - applied[at]), std::abs(sumWhole[at] - applied[at])});
                 worstAcquisition = std::max(worstAcquisition, std::abs(image.computedImage[i] - applied[at]));
             }
         }
     }
-    std::printf("  peak %.6g e-; largest |sum of columns - image| %.3g, |acquisition's computed part - image| %.3g\n", peak, worstColumns, worstAcquisition);
+    std::printf("  sigma_s %g /mm: peak %.6g e-, the field's share %.4f; largest |sum of columns - image| %.3g, |acquisition's computed part - image| %.3g\n",
+                sigmaSPerMm, peak, fieldElectrons / computedElectrons, worstColumns, worstAcquisition);
+    if (sigmaSPerMm > 0) {
+        EXPECT_GT(fieldElectrons, 1e-3 * computedElectrons);  // the field is there (and the check above says the columns hold it)
+        // Without the field the operator's image is the computed image less the field's light.
+        optics::AcquireOptions noField = o;
+        noField.field.photons = 0;
+        optics::StackOperator without(s.scene, s.microscope, {0, 1}, noField);
+        ASSERT_TRUE(without.refreshGains(s.scene));
+        const std::vector<double> appliedWithout = without.apply(map, std::vector<double>(map.size(), 1.0));
+        double total = 0, totalWithout = 0;
+        for (size_t i = 0; i < applied.size(); ++i) total += applied[i], totalWithout += appliedWithout[i];
+        std::printf("  the columns' total %.6g e- with the field, %.6g without; the acquisitions' estimate of the field's light %.6g\n", total,
+                    totalWithout, fieldElectrons);
+        EXPECT_GT(total - totalWithout, 1e-3 * total);
+    } else {
+        EXPECT_EQ(fieldElectrons, 0.0);
+    }
     EXPECT_GT(peak, 0);
     EXPECT_LE(worstColumns, 1e-11 * peak);
     // The label split keeps each part in float: parts and whole differ by float rounding (1e-7).
     EXPECT_LE(worstAcquisition, 1e-6 * peak);
 }
+
+TEST(StackOperator, LabelColumnsAddUpToTheAcquisitionsComputedImage) { expectColumnsAddUpToTheComputedImage(0.0); }
+
+TEST(StackOperator, LabelColumnsHoldTheExcitationFieldsEmissionInScatteringTissue) { expectColumnsAddUpToTheComputedImage(5.0); }
 
 TEST(EmissionLattice, LabelPartsAddUpToTheConcentrations) {
     FitSpecimen s;
