@@ -51,6 +51,7 @@ GroundTruth groundTruth(const Scene& scene, const Microscope& m, const std::vect
 
     AcquireOptions ideal = options;
     ideal.unscattered.attenuation = false;
+    ideal.field.photons = 0;  // nor the tissue's scattered excitation
     StackOperator op(scene, m, channels, ideal);
     op.refreshGains(scene, options.cancel);
     const ParameterMap map = ParameterMap::labels(op.labels(), false);

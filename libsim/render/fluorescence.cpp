@@ -192,6 +192,20 @@ double FluorescencePlan::kernel(int medium, const double* channels, double lambd
     return sum * lambdaExcitation / lambda;
 }
 
+void FluorescencePlan::kernels(int medium, const double* channels, const double* lambdaExcitation, const double* lambda,
+                               double out[kNumWavelengths][kNumWavelengths]) const {
+    double sum[kNumWavelengths][kNumWavelengths] = {};
+    for (const DyeTerm& t : media_[static_cast<size_t>(medium)].dyes) {
+        double emitted[kNumWavelengths], absorbed[kNumWavelengths];
+        for (int j = 0; j < kNumWavelengths; ++j) emitted[j] = t.dye->quantumYield() * t.dye->emissionPdf(lambda[j]);
+        for (int k = 0; k < kNumWavelengths; ++k) absorbed[k] = dyeAbsorption(*t.dye, lambdaExcitation[k], channels[t.channel]);
+        for (int j = 0; j < kNumWavelengths; ++j)
+            for (int k = 0; k < kNumWavelengths; ++k) sum[j][k] += emitted[j] * absorbed[k];
+    }
+    for (int j = 0; j < kNumWavelengths; ++j)
+        for (int k = 0; k < kNumWavelengths; ++k) out[j][k] = sum[j][k] * lambdaExcitation[k] / lambda[j];
+}
+
 std::array<double, kMaxMediumChannels> FluorescencePlan::kernelPerMolar(int medium, double lambdaExcitation, double lambda) const {
     std::array<double, kMaxMediumChannels> perChannel{};
     for (const DyeTerm& t : media_[static_cast<size_t>(medium)].dyes)

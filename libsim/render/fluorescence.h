@@ -47,6 +47,10 @@ public:
     // Σ_i Φ_i f_i(λ) σa,i(λx; c_i) λx/λ. The factor λx/λ
     // turns photons counted by Φ into energy.
     double kernel(int medium, const double* channels, double lambdaExcitation, double lambda) const;
+    // The kernel at every pair of n camera and n excitation wavelengths, out[j][k] for λ_j and λx_k, each
+    // the same number kernel() gives; each dye's spectra are looked up once per wavelength, not per pair.
+    void kernels(int medium, const double* channels, const double* lambdaExcitation, const double* lambda,
+                 double out[kNumWavelengths][kNumWavelengths]) const;
     // The same per mol/L of each channel (linear in the concentrations): kernel = Σ_c channels[c] this[c].
     std::array<double, kMaxMediumChannels> kernelPerMolar(int medium, double lambdaExcitation, double lambda) const;
 

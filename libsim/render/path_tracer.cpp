@@ -346,13 +346,14 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double
     const SampledWavelengths wlx = fluorescence_.sampleExcitation(rng.uniform(), rng.uniform());
     // A[j][k]: throughput from the mean radiance at excitation wavelength k to camera wavelength j,
     // Σ_k A[j][k] Lx[k] being the hero-wavelength estimate of ∫ K(λx -> λj) (1/4π)∫L dω dλx.
-    double A[kNumWavelengths][kNumWavelengths] = {};
+    double A[kNumWavelengths][kNumWavelengths] = {}, K[kNumWavelengths][kNumWavelengths];
+    fluorescence_.kernels(medium, channels, wlx.lambda.data(), wl.lambda.data(), K);
     SampledSpectrum start(0.0);  // initial throughput of the sub-path per excitation slot
     for (int k = 0; k < kNumWavelengths; ++k) {
         if (wlx.pdf[k] == 0) continue;
         for (int j = 0; j < kNumWavelengths; ++j) {
             if (weight[j] == 0) continue;
-            A[j][k] = weight[j] * fluorescence_.kernel(medium, channels, wlx.lambda[k], wl.lambda[j]) / (wlx.pdf[k] * kNumWavelengths);
+            A[j][k] = weight[j] * K[j][k] / (wlx.pdf[k] * kNumWavelengths);
             start[k] = std::max(start[k], A[j][k]);
         }
     }
