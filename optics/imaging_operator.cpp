@@ -162,13 +162,12 @@ struct StackOperator::Channel {
     // Per plane, the beams' scattered excitation (null where there is none), traced as the acquisition
     // traces it (same stream): its emission is part of each column, as it is of the computed image.
     std::vector<std::unique_ptr<const BeamExcitationField>> fields;
+    const BeamExcitationField* fieldAt(int plane) const { return fields.empty() ? nullptr : fields[static_cast<size_t>(plane)].get(); }
 };
 
 StackOperator::StackOperator(const Scene& scene, const Microscope& m, std::vector<size_t> channels, const AcquireOptions& options)
     : scene_(scene), width_(m.width), height_(m.height), planes_(m.stack.planes), threads_(options.threads), options_(options), objective_(m.objective),
       detector_(m.detector) {
-    AcquireOptions o = options;
-    o.estimator = Estimator::Split;
     options_.estimator = Estimator::Split;
     for (int k = 0; k < planes_; ++k) {
         offsets_.push_back(m.planeOffsetMm(k));
@@ -178,7 +177,7 @@ StackOperator::StackOperator(const Scene& scene, const Microscope& m, std::vecto
         auto ch = std::make_unique<Channel>();
         ch->microscopeChannel = c;
         ch->name = m.channels[c].name;
-        ch->imaging = setUpChannelImaging(scene, m, c, o, true);
+        ch->imaging = setUpChannelImaging(scene, m, c, options_, true);
         for (int k = 0; k < planes_; ++k) ch->planeLights.push_back(m.lightsAt(scene, m.channels[c], offsets_[static_cast<size_t>(k)]));
         if (ch->imaging.unscattered && ch->imaging.unscattered->active()) {
             ch->lattice = ch->imaging.unscattered->lattice(scene, threads_, options.cancel);
@@ -292,7 +291,7 @@ SparseColumns StackOperator::columns(const ParameterMap& map, const std::atomic<
             if (cancel && cancel->load()) throw Cancelled("cancelled while computing the fit's columns");
             const auto start = std::chrono::steady_clock::now();
             const PlaneTerms terms = planeTerms(*ch.imaging.unscattered, *ch.lattice, *ch.gains, ch.planeLights[static_cast<size_t>(k)],
-                                                offsets_[static_cast<size_t>(k)], map, threads_, ch.fields.empty() ? nullptr : ch.fields[static_cast<size_t>(k)].get());
+                                                offsets_[static_cast<size_t>(k)], map, threads_, ch.fieldAt(k));
             const size_t base = planeImage(slot, k) * planePixels;
             for (size_t b0 = 0; b0 < map.size(); b0 += batch) {
                 const size_t b1 = std::min(map.size(), b0 + batch);
@@ -350,7 +349,7 @@ std::vector<double> StackOperator::applyParts(const ParameterMap& map, const std
         for (int k = 0; k < planes_; ++k) {
             const auto start = std::chrono::steady_clock::now();
             PlaneTerms terms = planeTerms(*ch.imaging.unscattered, *ch.lattice, *ch.gains, ch.planeLights[static_cast<size_t>(k)],
-                                          offsets_[static_cast<size_t>(k)], map, threads_, ch.fields.empty() ? nullptr : ch.fields[static_cast<size_t>(k)].get());
+                                          offsets_[static_cast<size_t>(k)], map, threads_, ch.fieldAt(k));
             for (size_t i = 0; i < terms.emissions.size(); ++i) {
                 double c = 0;
                 for (uint32_t e = terms.entryStart[i]; e < terms.entryStart[i + 1]; ++e) {
@@ -381,7 +380,7 @@ std::vector<double> StackOperator::applyAdjoint(const ParameterMap& map, const s
         for (int k = 0; k < planes_; ++k) {
             const auto start = std::chrono::steady_clock::now();
             const PlaneTerms terms = planeTerms(*ch.imaging.unscattered, *ch.lattice, *ch.gains, ch.planeLights[static_cast<size_t>(k)],
-                                                offsets_[static_cast<size_t>(k)], map, threads_, ch.fields.empty() ? nullptr : ch.fields[static_cast<size_t>(k)].get());
+                                                offsets_[static_cast<size_t>(k)], map, threads_, ch.fieldAt(k));
             const std::vector<double> image(y.begin() + static_cast<std::ptrdiff_t>(planeImage(slot, k) * planePixels),
                                             y.begin() + static_cast<std::ptrdiff_t>((planeImage(slot, k) + 1) * planePixels));
             const std::vector<double> sensitivity = ch.imaging.unscattered->projector(offsets_[static_cast<size_t>(k)]).backProject(image, terms.emissions, threads_);

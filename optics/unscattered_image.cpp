@@ -417,6 +417,61 @@ bool leaveOutFaintest(const std::vector<PointEmission>& emissions, double fracti
     return true;
 }
 
+// The field's noise: the image of half the difference of its halves, from the points of each pixel's
+// column, dye and group of kFieldNoiseLayers layers gathered at the pixel's centre and the group's middle
+// layer (about a sixteenth of the points: where within a pixel and half a micrometre a point lies matters
+// to its image, little to the size of the noise: the summary's field noise moved 4 % on the README job's
+// first plane against gathering in pixels alone). The parts arrive by layer (the lattice's order), so each
+// group of layers is gathered on a dense image of the region per dye and flushed by pixel when the next
+// group begins. Target 0 parts are the field's own emission: their sum goes to `fieldEmitted`.
+std::vector<PointEmission> gatheredFieldNoise(const std::vector<PointEmission>& fieldParts, const LatticeGeometry& g, size_t dyes, double& fieldEmitted) {
+    constexpr int kFieldNoiseLayers = 4;
+    const double lastLayer = g.planeLayers - 1;
+    const int64_t W = g.regionWidth(), H = g.regionHeight(), D = static_cast<int64_t>(dyes);
+    std::vector<PointEmission> out;
+    std::vector<double> sum(static_cast<size_t>(W * H * D), 0.0);
+    std::vector<uint8_t> seen(sum.size(), 0);
+    std::vector<uint32_t> touched;
+    int64_t group = -1;
+    const auto flush = [&] {
+        std::sort(touched.begin(), touched.end());
+        for (uint32_t index : touched) {
+            PointEmission em;
+            em.dye = static_cast<uint32_t>(index % D);
+            em.u = static_cast<double>((index / D) % W) + 0.5;
+            em.v = static_cast<double>(index / D / W) + 0.5;
+            em.layer = std::min(lastLayer, static_cast<double>(group * kFieldNoiseLayers + kFieldNoiseLayers / 2));
+            em.e = sum[index];
+            out.push_back(em);
+            sum[index] = 0;
+            seen[index] = 0;
+        }
+        touched.clear();
+    };
+    fieldEmitted = 0;
+    for (const PointEmission& em : fieldParts) {
+        if (em.target == 0) {
+            fieldEmitted += em.e;
+            continue;
+        }
+        const int64_t px = static_cast<int64_t>(std::floor(em.u)), py = static_cast<int64_t>(std::floor(em.v));
+        const int64_t layerGroup = static_cast<int64_t>(std::floor(std::max(0.0, em.layer) / kFieldNoiseLayers));
+        if (px < 0 || px >= W || py < 0 || py >= H || em.dye >= D) continue;  // the lattice lies within the region
+        if (layerGroup != group) {
+            flush();
+            group = layerGroup;
+        }
+        const size_t index = static_cast<size_t>((py * W + px) * D + em.dye);
+        if (!seen[index]) {
+            seen[index] = 1;
+            touched.push_back(static_cast<uint32_t>(index));
+        }
+        sum[index] += em.e;
+    }
+    flush();
+    return out;
+}
+
 }  // namespace
 
 UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<Light>& lights, const Imaging& plane, const UnscatteredModel& model,
@@ -444,61 +499,10 @@ UnscatteredPlane computeUnscatteredImage(const Scene& scene, const std::vector<L
     t = std::chrono::steady_clock::now();
     const PsfProjector& projector = model.projector(offset);
     const double kernelsBefore = projector.kernelSeconds();
-    // The field's noise: the image of half the difference of its halves, from the points of each pixel's
-    // column, dye and group of kFieldNoiseLayers layers gathered at the pixel's centre and the group's
-    // middle layer (about a sixteenth of the points: where within a pixel and half a micrometre a point
-    // lies matters to its image, little to the size of the noise: the summary's field noise moved 4 % on
-    // the README job's first plane against gathering in pixels alone).
-    constexpr int kFieldNoiseLayers = 4;
     const LatticeGeometry& g = model.geometry();
-    const double lastLayer = g.planeLayers - 1;
     double fieldEmitted = 0, emitted = 0;
     for (const PointEmission& em : emissions) emitted += em.e;
-    std::vector<PointEmission> halfDifference;
-    {
-        // The points arrive by layer (the lattice's order), so each group of layers is gathered on a dense
-        // image of the region per dye and flushed by pixel when the next group begins.
-        const int64_t W = g.regionWidth(), H = g.regionHeight(), D = static_cast<int64_t>(model.dyes().dyes.size());
-        std::vector<double> sum(static_cast<size_t>(W * H * D), 0.0);
-        std::vector<uint8_t> seen(sum.size(), 0);
-        std::vector<uint32_t> touched;
-        int64_t group = -1;
-        const auto flush = [&] {
-            std::sort(touched.begin(), touched.end());
-            for (uint32_t index : touched) {
-                PointEmission em;
-                em.dye = static_cast<uint32_t>(index % D);
-                em.u = static_cast<double>((index / D) % W) + 0.5;
-                em.v = static_cast<double>(index / D / W) + 0.5;
-                em.layer = std::min(lastLayer, static_cast<double>(group * kFieldNoiseLayers + kFieldNoiseLayers / 2));
-                em.e = sum[index];
-                halfDifference.push_back(em);
-                sum[index] = 0;
-                seen[index] = 0;
-            }
-            touched.clear();
-        };
-        for (const PointEmission& em : fieldParts) {
-            if (em.target == 0) {
-                fieldEmitted += em.e;
-                continue;
-            }
-            const int64_t px = static_cast<int64_t>(std::floor(em.u)), py = static_cast<int64_t>(std::floor(em.v));
-            const int64_t layerGroup = static_cast<int64_t>(std::floor(std::max(0.0, em.layer) / kFieldNoiseLayers));
-            if (px < 0 || px >= W || py < 0 || py >= H || em.dye >= D) continue;  // the lattice lies within the region
-            if (layerGroup != group) {
-                flush();
-                group = layerGroup;
-            }
-            const size_t index = static_cast<size_t>((py * W + px) * D + em.dye);
-            if (!seen[index]) {
-                seen[index] = 1;
-                touched.push_back(static_cast<uint32_t>(index));
-            }
-            sum[index] += em.e;
-        }
-        flush();
-    }
+    const std::vector<PointEmission> halfDifference = gatheredFieldNoise(fieldParts, g, model.dyes().dyes.size(), fieldEmitted);
     std::vector<PointEmission> brighter;
     const bool leftOut = leaveOutFaintest(emissions, model.options().dropPointsBelow, brighter, out.droppedPoints, out.droppedFraction);
     std::vector<std::vector<double>> images = projector.project(leftOut ? brighter : emissions, 1, threads, cancel);
