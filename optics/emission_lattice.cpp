@@ -465,7 +465,8 @@ EmissionLattice::EmissionLattice(const Scene& scene, const ChannelDyes& dyes, co
             media[n] = traceStraightLine(scene, Ray{top, -g.axis}, medium0, 0.0, zHigh - zLow, LineSurfaces::ThroughAll).segments;
         });
         for (size_t n = 0; n < keys.size(); ++n) columnMedia[keys[n]] = std::move(media[n]);
-        for (auto& chunk : chunks) {
+        parallelFor(chunks.size(), threads, [&](size_t c) {
+            std::vector<Candidate>& chunk = chunks[c];
             std::vector<Candidate> kept;
             kept.reserve(chunk.size());
             for (Candidate& s : chunk) {
@@ -482,7 +483,7 @@ EmissionLattice::EmissionLattice(const Scene& scene, const ChannelDyes& dyes, co
                     }
             }
             chunk.swap(kept);
-        }
+        });
     }
 
     // --- One sorted list: by z, then y, then x (deterministic whatever the thread count), labels
@@ -507,29 +508,41 @@ EmissionLattice::EmissionLattice(const Scene& scene, const ChannelDyes& dyes, co
             const LatticePoint& q = chunks[c][i].point;
             order.push_back({q.z, q.y, q.x, q.volumeMm3, q.medium, static_cast<uint32_t>(c), static_cast<uint32_t>(i)});
         }
-    std::sort(order.begin(), order.end(), [](const Key& a, const Key& b) {
+    // Two halves sorted on two threads and merged: the same order as one sort (no two points share a key).
+    const auto before = [](const Key& a, const Key& b) {
         return std::tie(a.z, a.y, a.x, a.medium, a.volume) < std::tie(b.z, b.y, b.x, b.medium, b.volume);
+    };
+    const auto middle = order.begin() + static_cast<std::ptrdiff_t>(order.size() / 2);
+    parallelFor(2, threads, [&](size_t half) {
+        if (half == 0) std::sort(order.begin(), middle, before);
+        else std::sort(middle, order.end(), before);
     });
+    std::inplace_merge(order.begin(), middle, order.end(), before);
     auto pointOf = [&](const Key& o) -> const Candidate& { return chunks[o.chunk][o.index]; };
-    points_.reserve(count);
-    concentrations_.reserve(count * static_cast<size_t>(slots_));
-    exact_.reserve(count);
-    if (withLabels) partStart_.reserve(count + 1);
-    for (const auto& o : order) {
-        const Candidate& s = pointOf(o);
-        points_.push_back(s.point);
-        for (int k = 0; k < slots_; ++k) concentrations_.push_back(s.c[static_cast<size_t>(k)]);
-        exact_.push_back(s.exact);
-        if (withLabels) {
-            partStart_.push_back(static_cast<uint32_t>(parts_.size()));
+    points_.resize(count);
+    concentrations_.resize(count * static_cast<size_t>(slots_));
+    exact_.resize(count);
+    if (withLabels) {
+        partStart_.assign(count + 1, 0);
+        for (size_t n = 0; n < count; ++n) partStart_[n + 1] = partStart_[n] + static_cast<uint32_t>(pointOf(order[n]).parts.size());
+        parts_.resize(partStart_.back());
+    }
+    constexpr size_t kPointsPerTask = 65536;
+    parallelFor((count + kPointsPerTask - 1) / kPointsPerTask, threads, [&](size_t task) {
+        for (size_t n = task * kPointsPerTask; n < std::min(count, (task + 1) * kPointsPerTask); ++n) {
+            const Candidate& s = pointOf(order[n]);
+            points_[n] = s.point;
+            for (int k = 0; k < slots_; ++k) concentrations_[n * static_cast<size_t>(slots_) + static_cast<size_t>(k)] = s.c[static_cast<size_t>(k)];
+            exact_[n] = s.exact;
+            if (!withLabels) continue;
+            uint32_t at = partStart_[n];
             for (Part p : s.parts) {
-                const LabelKey k = chunkKeys[o.chunk][p.key];
+                const LabelKey k = chunkKeys[order[n].chunk][p.key];
                 p.key = static_cast<uint32_t>(std::lower_bound(labels_.begin(), labels_.end(), k) - labels_.begin());
-                parts_.push_back(p);
+                parts_[at++] = p;
             }
         }
-    }
-    if (withLabels) partStart_.push_back(static_cast<uint32_t>(parts_.size()));
+    });
     seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 

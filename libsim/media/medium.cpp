@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "core/errors.h"
+#include "spectral/wavelength_cache.h"
 
 namespace fluorosim {
 namespace {
@@ -21,7 +22,7 @@ void checkCoefficient(const std::string& medium, const char* field, const Spectr
 
 Medium::Medium(std::string name, Spectrum sigmaA, Spectrum sigmaS, double g, double ior, std::vector<DyeComponent> dyes,
                std::shared_ptr<const VolumeFields> volume)
-    : name_(std::move(name)), sigmaA_(std::move(sigmaA)), sigmaS_(std::move(sigmaS)), dyes_(std::move(dyes)),
+    : spectraId_(newWavelengthCacheId()), name_(std::move(name)), sigmaA_(std::move(sigmaA)), sigmaS_(std::move(sigmaS)), dyes_(std::move(dyes)),
       volume_(std::move(volume)), phase_(0.0), ior_(ior) {
     if (channelCount() > kMaxMediumChannels)
         throw ConfigError("medium \"" + name_ + "\": at most " + std::to_string(kMaxMediumChannels - kFirstDyeChannel) +
@@ -61,6 +62,11 @@ Medium Medium::withVolume(std::shared_ptr<const VolumeFields> volume) const {
 }
 
 MediumSpectra Medium::spectra(const SampledWavelengths& wl) const {
+    thread_local WavelengthCache<MediumSpectra> recent;
+    return recent.get(spectraId_, 0, wl, [&] { return evaluateSpectra(wl); });
+}
+
+MediumSpectra Medium::evaluateSpectra(const SampledWavelengths& wl) const {
     MediumSpectra s;
     s.channels = channelCount();
     s.sigmaA[kSolventChannel] = sigmaA_.sample(wl);

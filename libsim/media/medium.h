@@ -112,9 +112,16 @@ public:
     // medium whose transmittance is known exactly, so that only the rest needs ratio tracking.
     const ChannelValues& channelFloor() const { return channelFloor_; }
 
+    // Each thread keeps the last few evaluations: a path asks for the same medium at the same
+    // wavelengths at every free flight and shadow ray.
     MediumSpectra spectra(const SampledWavelengths& wl) const;
     void channelValues(const Vec3& p, double* out) const {
         if (volume_) volume_->values(p, out);
+        else std::copy(constants_.begin(), constants_.begin() + channelCount(), out);
+    }
+    // The same, given each channel's upper bound at p (the maxima a majorant segment was built from).
+    void channelValues(const Vec3& p, double* out, const double* upper) const {
+        if (volume_) volume_->values(p, out, upper);
         else std::copy(constants_.begin(), constants_.begin() + channelCount(), out);
     }
     MediumSample coefficients(const Vec3& p, const SampledWavelengths& wl) const {
@@ -134,6 +141,10 @@ public:
     }
 
 private:
+    MediumSpectra evaluateSpectra(const SampledWavelengths& wl) const;
+
+    // Names the spectra for the per-thread cache; copies share it, as they share the spectra.
+    uint64_t spectraId_;
     std::string name_;
     Spectrum sigmaA_, sigmaS_;
     std::vector<DyeComponent> dyes_;

@@ -179,6 +179,11 @@ FluorescencePlan::FluorescencePlan(const Scene& scene, const std::vector<Light>&
 double FluorescencePlan::branchDensityCap(int medium) const { return media_[static_cast<size_t>(medium)].branchCap; }
 
 std::array<SampledSpectrum, kMaxMediumChannels> FluorescencePlan::branchDensityPerMolar(int medium, const SampledWavelengths& wl) const {
+    thread_local WavelengthCache<std::array<SampledSpectrum, kMaxMediumChannels>> recent;
+    return recent.get(cacheId_, medium, wl, [&] { return evaluateBranchDensityPerMolar(medium, wl); });
+}
+
+std::array<SampledSpectrum, kMaxMediumChannels> FluorescencePlan::evaluateBranchDensityPerMolar(int medium, const SampledWavelengths& wl) const {
     std::array<SampledSpectrum, kMaxMediumChannels> perChannel{};
     for (const DyeTerm& t : media_[static_cast<size_t>(medium)].dyes)
         for (int j = 0; j < kNumWavelengths; ++j) perChannel[static_cast<size_t>(t.channel)][j] += t.branchWeight * t.dye->emissionPdf(wl.lambda[j]);

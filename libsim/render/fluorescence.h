@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "scene/scene.h"
+#include "spectral/wavelength_cache.h"
 #include "spectral/wavelength_sampler.h"
 
 namespace fluorosim {
@@ -70,6 +71,9 @@ private:
         std::vector<DyeTerm> dyes;  // only dyes that can emit
         double branchCap = 1.0;     // 1/mm
     };
+    std::array<SampledSpectrum, kMaxMediumChannels> evaluateBranchDensityPerMolar(int medium, const SampledWavelengths& wl) const;
+
+    uint64_t cacheId_ = newWavelengthCacheId();  // copies share it, as they share the terms
     FluorescenceModel model_;
     bool active_ = false;
     std::vector<MediumTerms> media_;

@@ -226,12 +226,14 @@ bool PathTracer::ratioTrack(const Medium& med, const MediumSpectra& spec, const 
         const MediumSample s = spec.at(v.data());
         return s.sigmaA + s.sigmaS;
     };
+    const double* segmentMaxima = nullptr;
     auto majorants = med.majorants(r, 0.0, length, [&](const double* values) {
+        segmentMaxima = values;
         return residual ? above(values) * kResidualMajorantScale : above(values);
     });
     const SampledSpectrum T_maj = sampleTmaj<SampledSpectrum>(majorants, rng, [&](double t, const SampledSpectrum& sigmaMaj, const SampledSpectrum& Tm) {
         ChannelValues ch;
-        med.channelValues(r.at(t), ch.data());
+        med.channelValues(r.at(t), ch.data(), segmentMaxima);
         const SampledSpectrum sigmaN = clampZero(sigmaMaj - above(ch.data()));
         const double pdf = Tm[0] * sigmaMaj[0];
         e.T *= Tm * sigmaN / pdf;
@@ -830,7 +832,9 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             // auxiliary: they change beta, r_u and r_l alike, so the MIS weights against next-event
             // estimation (which ratio-tracks the tracking process only) still sum to one.
             SampledSpectrum sigmaBBar(0.0);  // of the segment being sampled
+            const double* segmentMaxima = nullptr;
             auto majorants = med.majorants(ray, 0.0, tMax, [&](const double* m) {
+                segmentMaxima = m;
                 const MediumSample s = spec.at(m);
                 const SampledSpectrum sigmaTBar = s.sigmaA + s.sigmaS;
                 sigmaBBar = branchDensity(m, sigmaTBar);
@@ -840,7 +844,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             const SampledSpectrum T_maj = sampleTmaj<SampledSpectrum>(
                 majorants, rng, [&](double t, const SampledSpectrum& sigmaMaj, const SampledSpectrum& Tm) {
                     ++stats.tentativeCollisions;
-                    med.channelValues(ray.at(t), ch.data());
+                    med.channelValues(ray.at(t), ch.data(), segmentMaxima);
                     const MediumSample mp = spec.at(ch.data());
                     if (dyed && rng.uniform() * sigmaMaj[0] < sigmaBBar[0]) {
                         // A branch-process point; it branches with probability sigmaB(p) / sigmaBBar.

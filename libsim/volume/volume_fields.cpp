@@ -168,6 +168,14 @@ void VolumeFields::values(const Vec3& pWorld, double* out) const {
     }
 }
 
+void VolumeFields::values(const Vec3& pWorld, double* out, const double* upper) const {
+    const Vec3 p = indexFromWorld_.apply(pWorld);
+    for (size_t c = 0; c < channels_.size(); ++c) {
+        const VolumeChannel& ch = channels_[c];
+        out[c] = ch.grid && upper[c] > ch.offset ? ch.offset + ch.scale * ch.grid->value(p, interpolation_) : ch.offset;
+    }
+}
+
 double VolumeFields::voxelSizeMm() const {
     bool anyGrid = false;
     for (const VolumeChannel& c : channels_) anyGrid = anyGrid || c.grid.has_value();

@@ -56,6 +56,9 @@ public:
     Interpolation interpolation() const { return interpolation_; }
     // Channel values at a world position, into out[channelCount()].
     void values(const Vec3& pWorld, double* out) const;
+    // The same values, given an upper bound of each channel at pWorld (a majorant segment's maxima):
+    // a channel bounded by its floor is its floor there, so its grid is not read.
+    void values(const Vec3& pWorld, double* out, const double* upper) const;
     const Affine& worldFromIndex() const { return worldFromIndex_; }
     // The shortest voxel edge in world units (mm); 1 when there is no grid.
     double voxelSizeMm() const;

@@ -83,6 +83,56 @@ TEST(MajorantGrid, DdaSegmentsTileTheRayAndBoundEveryChannel) {
     }
 }
 
+// The same property on a large sparse grid (38³ blocks of 1-voxel cells, dye in four small spots):
+// long runs of empty blocks and mixed blocks' empty cells, rays that start on block faces and rays
+// aimed at the spots, checked every quarter voxel as well as at random points of each segment.
+TEST(MajorantGrid, LongEmptyRunsOfALargeSparseGridStillTileAndBound) {
+    static constexpr int centres[4][3] = {{40, 40, 40}, {250, 60, 200}, {150, 150, 150}, {20, 280, 270}};
+    const auto spots = [](int i, int j, int k) {
+        for (const auto& c : centres)
+            if (std::abs(i - c[0]) <= 2 && std::abs(j - c[1]) <= 1 && std::abs(k - c[2]) <= 3) return 1.0 + 0.1 * (i - c[0]);
+        return 0.0;
+    };
+    const DensityGrid g = DensityGrid::fromVoxels("spots", {{0, 0, 0}, {299, 299, 299}}, voxels(0.01), spots);
+    std::vector<VolumeChannel> ch(2);
+    ch[0].grid = g;
+    ch[1].offset = 0.25;
+    const VolumeFields f(std::move(ch), Affine(), Interpolation::Trilinear, {1});
+    Rng rng(29, 3);
+    const Vec3 centre = f.worldFromIndex().apply(Vec3(150, 150, 150));
+    for (int r = 0; r < 400; ++r) {
+        Vec3 o = centre + Vec3(rng.uniform() - 0.5, rng.uniform() - 0.5, rng.uniform() - 0.5) * 4.0;
+        Vec3 d = r % 5 == 0 ? Vec3(r % 3 == 0, r % 3 == 1, r % 3 == 2) : normalize(Vec3(rng.uniform() - 0.5, rng.uniform() - 0.5, rng.uniform() - 0.5));
+        if (r % 4 == 0) o = f.worldFromIndex().apply(Vec3(8.0 * std::round(rng.uniform() * 37) - 2, 8.0 * std::round(rng.uniform() * 37) - 2, 150));  // on block faces
+        if (r % 2 == 1) {  // aimed at a spot, so that the ray meets dye after a long empty run
+            const auto& c = centres[(r / 2) % 4];
+            d = normalize(f.worldFromIndex().apply(Vec3(c[0], c[1], c[2])) - o);
+        }
+        expectDdaBounds(f, Ray{o, d}, 0.0, 8.0, rng);
+        if (HasFatalFailure()) {
+            ADD_FAILURE() << "ray " << r;
+            return;
+        }
+        // Every quarter voxel along the ray, not only a few points per segment: a long empty segment
+        // that reached one block too far would hold a spot.
+        std::vector<MajorantCellSegment> segments;
+        auto tr = f.traverse(Ray{o, d}, 0.0, 8.0);
+        while (const auto seg = tr.next()) segments.push_back(*seg);
+        std::vector<double> v(2);
+        size_t at = 0;
+        for (double t = 0; t < 8.0; t += 0.0025) {
+            while (at + 1 < segments.size() && segments[at].tMax <= t) ++at;
+            f.values(Ray{o, d}.at(t), v.data());
+            ASSERT_LE(v[0], segments[at].maxValues[0] * (1 + 1e-6)) << "ray " << r << " at t = " << t;
+        }
+    }
+    // And the dye is still found: a ray along the first spot's row meets its maxima.
+    auto tr = f.traverse(Ray{f.worldFromIndex().apply(Vec3(-5, 40, 40)), Vec3(1, 0, 0)}, 0.0, 10.0);
+    double largest = 0;
+    while (const auto s = tr.next()) largest = std::max(largest, s->maxValues[0]);
+    EXPECT_NEAR(largest, 1.2, 1e-6);  // the grid holds floats
+}
+
 TEST(MajorantGrid, FinerCellsAreTighterAndTheGlobalCellIsTheMaximum) {
     const VolumeFields global = sparseFields(0.01, Vec3(), -1), fine = sparseFields(0.01, Vec3(), 4);
     EXPECT_EQ(global.cellCounts(), (std::array<int, 3>{1, 1, 1}));
