@@ -166,7 +166,7 @@ struct StackOperator::Channel {
 };
 
 StackOperator::StackOperator(const Scene& scene, const Microscope& m, std::vector<size_t> channels, const AcquireOptions& options)
-    : scene_(scene), width_(m.width), height_(m.height), planes_(m.stack.planes), threads_(options.threads), options_(options), objective_(m.objective),
+    : scene_(scene), width_(m.width), height_(m.height), planes_(m.stack.planes), options_(options), objective_(m.objective),
       detector_(m.detector) {
     options_.estimator = Estimator::Split;
     for (int k = 0; k < planes_; ++k) {
@@ -180,7 +180,7 @@ StackOperator::StackOperator(const Scene& scene, const Microscope& m, std::vecto
         ch->imaging = setUpChannelImaging(scene, m, c, options_, true);
         for (int k = 0; k < planes_; ++k) ch->planeLights.push_back(m.lightsAt(scene, m.channels[c], offsets_[static_cast<size_t>(k)]));
         if (ch->imaging.unscattered && ch->imaging.unscattered->active()) {
-            ch->lattice = ch->imaging.unscattered->lattice(scene, threads_, options.cancel);
+            ch->lattice = ch->imaging.unscattered->lattice(scene, options_.threads, options.cancel);
             if (!ch->lattice) throw Cancelled("cancelled while building the emission lattice");
         }
         channels_.push_back(std::move(ch));
@@ -214,7 +214,7 @@ bool StackOperator::refreshGains(const Scene& scene, const std::atomic<bool>* ca
     const auto start = std::chrono::steady_clock::now();
     for (auto& ch : channels_) {
         if (!ch->lattice) continue;
-        auto g = ch->imaging.unscattered->gainsFor(scene, threads_, cancel);
+        auto g = ch->imaging.unscattered->gainsFor(scene, options_.threads, cancel);
         if (!g) return false;
         ch->gains = std::move(g);
         ch->fields.clear();
@@ -291,7 +291,7 @@ SparseColumns StackOperator::columns(const ParameterMap& map, const std::atomic<
             if (cancel && cancel->load()) throw Cancelled("cancelled while computing the fit's columns");
             const auto start = std::chrono::steady_clock::now();
             const PlaneTerms terms = planeTerms(*ch.imaging.unscattered, *ch.lattice, *ch.gains, ch.planeLights[static_cast<size_t>(k)],
-                                                offsets_[static_cast<size_t>(k)], map, threads_, ch.fieldAt(k));
+                                                offsets_[static_cast<size_t>(k)], map, options_.threads, ch.fieldAt(k));
             const size_t base = planeImage(slot, k) * planePixels;
             for (size_t b0 = 0; b0 < map.size(); b0 += batch) {
                 const size_t b1 = std::min(map.size(), b0 + batch);
@@ -307,7 +307,7 @@ SparseColumns StackOperator::columns(const ParameterMap& map, const std::atomic<
                     }
                 if (ems.empty()) continue;
                 const std::vector<std::vector<double>> images = ch.imaging.unscattered->projector(offsets_[static_cast<size_t>(k)])
-                                                                    .project(ems, static_cast<int>(b1 - b0), threads_, cancel,
+                                                                    .project(ems, static_cast<int>(b1 - b0), options_.threads, cancel,
                                                                              withTail ? ProjectorParts::All : ProjectorParts::WithoutTail);
                 if (images.empty()) throw Cancelled("cancelled while computing the fit's columns");
                 for (size_t j = b0; j < b1; ++j) {
@@ -349,7 +349,7 @@ std::vector<double> StackOperator::applyParts(const ParameterMap& map, const std
         for (int k = 0; k < planes_; ++k) {
             const auto start = std::chrono::steady_clock::now();
             PlaneTerms terms = planeTerms(*ch.imaging.unscattered, *ch.lattice, *ch.gains, ch.planeLights[static_cast<size_t>(k)],
-                                          offsets_[static_cast<size_t>(k)], map, threads_, ch.fieldAt(k));
+                                          offsets_[static_cast<size_t>(k)], map, options_.threads, ch.fieldAt(k));
             for (size_t i = 0; i < terms.emissions.size(); ++i) {
                 double c = 0;
                 for (uint32_t e = terms.entryStart[i]; e < terms.entryStart[i + 1]; ++e) {
@@ -360,7 +360,7 @@ std::vector<double> StackOperator::applyParts(const ParameterMap& map, const std
                 terms.emissions[i].e *= c;
             }
             const std::vector<std::vector<double>> images =
-                ch.imaging.unscattered->projector(offsets_[static_cast<size_t>(k)]).project(terms.emissions, 1, threads_, nullptr, parts);
+                ch.imaging.unscattered->projector(offsets_[static_cast<size_t>(k)]).project(terms.emissions, 1, options_.threads, nullptr, parts);
             std::copy(images[0].begin(), images[0].end(), y.begin() + static_cast<std::ptrdiff_t>(planeImage(slot, k) * planePixels));
             projectionSeconds_ += secondsSince(start);
             ++projections_;
@@ -380,10 +380,10 @@ std::vector<double> StackOperator::applyAdjoint(const ParameterMap& map, const s
         for (int k = 0; k < planes_; ++k) {
             const auto start = std::chrono::steady_clock::now();
             const PlaneTerms terms = planeTerms(*ch.imaging.unscattered, *ch.lattice, *ch.gains, ch.planeLights[static_cast<size_t>(k)],
-                                                offsets_[static_cast<size_t>(k)], map, threads_, ch.fieldAt(k));
+                                                offsets_[static_cast<size_t>(k)], map, options_.threads, ch.fieldAt(k));
             const std::vector<double> image(y.begin() + static_cast<std::ptrdiff_t>(planeImage(slot, k) * planePixels),
                                             y.begin() + static_cast<std::ptrdiff_t>((planeImage(slot, k) + 1) * planePixels));
-            const std::vector<double> sensitivity = ch.imaging.unscattered->projector(offsets_[static_cast<size_t>(k)]).backProject(image, terms.emissions, threads_);
+            const std::vector<double> sensitivity = ch.imaging.unscattered->projector(offsets_[static_cast<size_t>(k)]).backProject(image, terms.emissions, options_.threads);
             for (size_t i = 0; i < terms.emissions.size(); ++i)
                 for (uint32_t e = terms.entryStart[i]; e < terms.entryStart[i + 1]; ++e) {
                     const ParameterMap::Entry& en = terms.entries[e];

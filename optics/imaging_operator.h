@@ -121,7 +121,6 @@ private:
     int width_ = 0, height_ = 0, planes_ = 0;
     std::vector<double> offsets_;
     std::vector<FocalPlane> focalPlanes_;
-    int threads_ = 0;
     AcquireOptions options_;  // the acquisition the operator models (its field options, seed and threads)
     ObjectiveOptions objective_;
     DetectorOptions detector_;

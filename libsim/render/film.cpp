@@ -49,8 +49,8 @@ double Film::estimatedBytes(int width, int height, int bins) {
     const double pixels = static_cast<double>(width) * static_cast<double>(height);
     const double perPixelAndChannel = 2 * 8    // elastic and fluorescent sums, double
                                       + 3 * 4;  // total, elastic and fluorescent layers as floats in the EXR image
-    // + non-finite counts, and a pass's staged samples (about 140 bytes per pixel and sample of the pass).
-    return pixels * ((3.0 + bins) * perPixelAndChannel + 4 + 160);
+    // + non-finite counts, and a pass's staged samples (one per pixel and sample of the pass).
+    return pixels * ((3.0 + bins) * perPixelAndChannel + 4 + static_cast<double>(sizeof(Row::Sample)));
 }
 
 void Film::addSample(int x, int y, const PathRadiance& L, const SampledWavelengths& wl) { addSpectra(x, y, L.elastic, L.fluorescent, wl); }

@@ -62,8 +62,8 @@ TEST(MemoryCap, FilmsBeyondTheCapAreRefusedBeforeAllocating) {
     const CapGuard cap(uint64_t(64) << 20);
     const TabulatedSpectrum one({360, 830}, {1, 1});
     // 8192 x 8192 pixels with 4000 bins would take terabytes: 28 bytes per pixel and channel (two double
-    // sums, three float layers) and 164 per pixel (non-finite counts, one staged sample of a pass).
-    EXPECT_DOUBLE_EQ(Film::estimatedBytes(8192, 8192, 4000), 8192.0 * 8192.0 * (4003.0 * 28 + 164));
+    // sums, three float layers) and per pixel 4 (non-finite counts) and one staged sample of a pass.
+    EXPECT_DOUBLE_EQ(Film::estimatedBytes(8192, 8192, 4000), 8192.0 * 8192.0 * (4003.0 * 28 + 4 + sizeof(Film::Row::Sample)));
     EXPECT_GT(Film::estimatedBytes(8192, 8192, 4000), 7e12);
     try {
         Film film(8192, 8192, 400, 800, 0.1, {one, one, one});
