@@ -115,12 +115,8 @@ public:
     // Each thread keeps the last few evaluations: a path asks for the same medium at the same
     // wavelengths at every free flight and shadow ray.
     MediumSpectra spectra(const SampledWavelengths& wl) const;
-    void channelValues(const Vec3& p, double* out) const {
-        if (volume_) volume_->values(p, out);
-        else std::copy(constants_.begin(), constants_.begin() + channelCount(), out);
-    }
-    // The same, given each channel's upper bound at p (the maxima a majorant segment was built from).
-    void channelValues(const Vec3& p, double* out, const double* upper) const {
+    // `upper`, if given, bounds each channel at p (the maxima a majorant segment was built from).
+    void channelValues(const Vec3& p, double* out, const double* upper = nullptr) const {
         if (volume_) volume_->values(p, out, upper);
         else std::copy(constants_.begin(), constants_.begin() + channelCount(), out);
     }

@@ -160,19 +160,11 @@ VolumeFields::VolumeFields(std::vector<VolumeChannel> channels, const Affine& wo
             }
 }
 
-void VolumeFields::values(const Vec3& pWorld, double* out) const {
-    const Vec3 p = indexFromWorld_.apply(pWorld);
-    for (size_t c = 0; c < channels_.size(); ++c) {
-        const VolumeChannel& ch = channels_[c];
-        out[c] = ch.grid ? ch.offset + ch.scale * ch.grid->value(p, interpolation_) : ch.offset;
-    }
-}
-
 void VolumeFields::values(const Vec3& pWorld, double* out, const double* upper) const {
     const Vec3 p = indexFromWorld_.apply(pWorld);
     for (size_t c = 0; c < channels_.size(); ++c) {
         const VolumeChannel& ch = channels_[c];
-        out[c] = ch.grid && upper[c] > ch.offset ? ch.offset + ch.scale * ch.grid->value(p, interpolation_) : ch.offset;
+        out[c] = ch.grid && (!upper || upper[c] > ch.offset) ? ch.offset + ch.scale * ch.grid->value(p, interpolation_) : ch.offset;
     }
 }
 

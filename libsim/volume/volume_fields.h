@@ -55,10 +55,9 @@ public:
     const VolumeChannel& channel(int c) const { return channels_.at(static_cast<size_t>(c)); }
     Interpolation interpolation() const { return interpolation_; }
     // Channel values at a world position, into out[channelCount()].
-    void values(const Vec3& pWorld, double* out) const;
-    // The same values, given an upper bound of each channel at pWorld (a majorant segment's maxima):
-    // a channel bounded by its floor is its floor there, so its grid is not read.
-    void values(const Vec3& pWorld, double* out, const double* upper) const;
+    // `upper`, if given, bounds each channel at pWorld (a majorant segment's maxima): a channel bounded
+    // by its floor is its floor there, so its grid is not read.
+    void values(const Vec3& pWorld, double* out, const double* upper = nullptr) const;
     const Affine& worldFromIndex() const { return worldFromIndex_; }
     // The shortest voxel edge in world units (mm); 1 when there is no grid.
     double voxelSizeMm() const;
