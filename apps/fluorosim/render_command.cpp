@@ -132,7 +132,7 @@ void runRender(const RenderArgs& a) {
     }
     if (!a.integrator.empty()) {
         const auto integrator = integratorFromName(a.integrator);
-        if (!integrator) throw ConfigError("--integrator: expected path or mnee, got \"" + excerpt(a.integrator) + "\"");
+        if (!integrator) throw ConfigError("--integrator: expected path, mnee or light, got \"" + excerpt(a.integrator) + "\"");
         scene.render.integrator = *integrator;
     }
     const int bins = Film::binCount(scene.spectral.lambdaMin, scene.spectral.lambdaMax, scene.spectral.binWidth);
@@ -242,6 +242,9 @@ void runRender(const RenderArgs& a) {
                                     {"surface_bounces", s.stats.surfaceBounces},
                                     // Null (and branch-process) collisions per real one: the cost of the majorants.
                                     {"null_per_real_collision", nullPerReal(s.stats)},
+                                    // Integrator "light": the photons this run traced, and their chains to the camera.
+                                    {"photons", s.light.photons},
+                                    {"photon_connections", s.light.connections},
                                     {"cancelled", s.cancelled},
                                     {"time_budget_seconds", a.time ? nlohmann::json(*a.time) : nlohmann::json(nullptr)},
                                     {"time_budget_spent", s.timeBudgetSpent}};

@@ -13,11 +13,11 @@
 #include "media/free_flight.h"
 #include "render/beam_core.h"
 #include "render/straight_line.h"
+#include "scene/light_sampler.h"
 
 namespace fluorosim {
 namespace {
 
-constexpr double kMm2PerM2 = 1e6;
 // The photons are split over this many slots, each traced in order into its own grid, so the sum does not
 // depend on the thread count; even and odd slots make the two halves.
 constexpr int kSlots = 8;

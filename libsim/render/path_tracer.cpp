@@ -111,12 +111,12 @@ SampledSpectrum cappedBranchDensity(const std::array<SampledSpectrum, kMaxMedium
 PathTracer::PathTracer(const Scene& scene)
     : scene_(scene), lightList_(scene.lights), lights_(scene, lightList_),
       fluorescence_(scene, lightList_), hasBeams_(anyBeam(lightList_)), lineWavelengths_(lineWavelengthsOf(lightList_)),
-      shells_(scene.render.integrator == Integrator::Mnee ? sphericalShellsOf(scene) : std::vector<SphericalShells>{}) {}
+      shells_(scene.render.integrator != Integrator::Path ? sphericalShellsOf(scene) : std::vector<SphericalShells>{}) {}
 
 PathTracer::PathTracer(const Scene& scene, std::vector<Light> lights)
     : scene_(scene), lightList_(std::move(lights)), lights_(scene, lightList_),
       fluorescence_(scene, lightList_), hasBeams_(anyBeam(lightList_)), lineWavelengths_(lineWavelengthsOf(lightList_)),
-      shells_(scene.render.integrator == Integrator::Mnee ? sphericalShellsOf(scene) : std::vector<SphericalShells>{}) {
+      shells_(scene.render.integrator != Integrator::Path ? sphericalShellsOf(scene) : std::vector<SphericalShells>{}) {
     const auto isArea = [](const Light& l) { return std::holds_alternative<AreaLight>(l); };
     if (std::any_of(scene.lights.begin(), scene.lights.end(), isArea) || std::any_of(lightList_.begin(), lightList_.end(), isArea))
         throw ConfigError("a separate light list cannot be used with emitting shapes (their lights are indexed by shape)");
@@ -294,6 +294,12 @@ struct PathTracer::PathState {
     const EmissionLabels* labels = nullptr;  // camera paths only: split re-emissions by label
     const ExcitationField* field = nullptr;  // the excitation at lines, looked up where it reaches (all generations)
     std::vector<PathRadiance::Labelled> labelled;
+    // PathStart::lightTracedFluorescence: the path is still on its way from the camera into the liquid of
+    // shells_[enterShells] (it has refracted inward through enterNext of its interfaces, outermost first);
+    // once inside (lightTracedSegment) its first free flight there has no branch points, and a scattering
+    // on it hands all the path's fluorescence to the light tracer (fluorescenceCovered).
+    bool cameraPrefix = false, lightTracedSegment = false, fluorescenceCovered = false;
+    int enterShells = -1, enterNext = 0;
 };
 
 PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats,
@@ -309,6 +315,7 @@ PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths&
     state.field = start.field;
     state.tMin = start.tMin;
     state.firstSegment = true;
+    state.cameraPrefix = start.lightTracedFluorescence && !shells_.empty();
     state.prevScatter = ray.o;
     return trace(state, wl, rng, stats);
 }
@@ -815,7 +822,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             // A path at a spectral line estimates the line's delta weight. Re-emitted light is a
             // continuous density and adds nothing to it (the continuous wavelength branch covers it
             // at that wavelength), so such paths never branch; this also ends every cascade there.
-            const bool dyed = !wl.discrete && fluorescence_.active(medium);
+            const bool dyed = !wl.discrete && fluorescence_.active(medium) && !st.lightTracedSegment && !st.fluorescenceCovered;
             // Branch density per unit of each channel (it is linear in the concentrations).
             const std::array<SampledSpectrum, kMaxMediumChannels> branchPerChannel =
                 dyed ? fluorescence_.branchDensityPerMolar(medium, wl) : std::array<SampledSpectrum, kMaxMediumChannels>{};
@@ -918,6 +925,8 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                             st.level = st.imaging->imageLevel(y);
                         }
                         st.firstSegment = false;
+                        st.fluorescenceCovered = st.fluorescenceCovered || st.lightTracedSegment;
+                        st.cameraPrefix = st.lightTracedSegment = false;
                         if (beta && r_u) {
                             scatterInMedium(y, med.phase(), med.phase().g(), {});
                             scattered = true;
@@ -994,9 +1003,31 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             if (chainExpectsHit && transmitted && dot(dir, hit->n) > 0) ++st.chainNext;
             else st.chainShells = -1;
         };
+        // The camera path's way into a stack's liquid (PathState::cameraPrefix): the stack's next interface,
+        // crossed inward by refraction, advances it; leaving the liquid or any other surface event ends it,
+        // except crossing an index-matched interface (the light tracer's transmittance crosses them too).
+        auto advancePrefix = [&](bool inward, bool indexMatched) {
+            if (!st.cameraPrefix) return;
+            if (st.lightTracedSegment) {  // left the liquid without a collision
+                st.cameraPrefix = st.lightTracedSegment = false;
+                return;
+            }
+            int s = st.enterShells;
+            if (s < 0)
+                for (size_t i = 0; i < shells_.size() && s < 0; ++i)
+                    if (shells_[i].shape[static_cast<size_t>(shells_[i].count - 1)] == hit->shape) s = static_cast<int>(i);
+            const SphericalShells* sh = s >= 0 ? &shells_[static_cast<size_t>(s)] : nullptr;
+            if (sh && inward && hit->shape == sh->shape[static_cast<size_t>(sh->count - 1 - st.enterNext)]) {
+                st.enterShells = s;
+                st.lightTracedSegment = ++st.enterNext == sh->count;
+            } else if (!indexMatched) {
+                st.cameraPrefix = false;
+            }
+        };
         if (shape.material == kNone) {
             if (!shape.isInterface) break;  // black emitter or absorber
             if (chainExpectsHit) followChain(true, ray.d);
+            advancePrefix(dot(ray.d, hit->n) < 0, true);
             medium = mediumAfterCrossing(shape, hit->n, ray.d, medium);
             ray.o = hit->p;
             st.tMin = leavingTMin(hit->n, ray.d, hit->epsilon);
@@ -1033,6 +1064,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         if (!bs) break;
         const Vec3 wi = frame.toWorld(bs->wi);
         followChain(bs->transmission && bs->specular, wi);
+        advancePrefix(bs->transmission && bs->specular && dot(wi, hit->n) < 0, false);
         beta *= bs->f * std::abs(bs->wi.z) / bs->pdf;
         r_l = r_u / bs->pdf;
         lightSampledAtLastVertex = !bs->specular;

@@ -129,6 +129,9 @@ struct PathStart {
     const EmissionLabels* labels = nullptr;      // split the camera path's re-emissions by label (PathRadiance::labelled)
     const ExcitationField* field = nullptr;      // excitation at lines looked up, not traced, where it reaches
     double tMin = 0;                             // > 0 when ray.o lies on a surface the ray leaves
+    // A camera path of a render whose fluorescence seen through glass spheres is traced from the lights
+    // (Integrator::Light, render/light_tracer.h): it leaves out what the photons' connections carry.
+    bool lightTracedFluorescence = false;
 };
 
 // How a sub-path started at a branch point weighs its first vertex's connection to a beam's unscattered
@@ -165,6 +168,8 @@ public:
 
     const FluorescencePlan& fluorescence() const { return fluorescence_; }
     const std::vector<Light>& lights() const { return lightList_; }
+    // The stacks of concentric smooth spheres that chains cross (Integrator::Mnee and Light; else none).
+    const std::vector<SphericalShells>& shells() const { return shells_; }
 
 private:
     struct PathState;
@@ -213,6 +218,12 @@ private:
     std::vector<SphericalShells> shells_;
     int shellsAround(const Vec3& p, int medium) const;
 };
+
+// Whether a camera path with Integrator::Light leaves its fluorescence to the light tracer: it does when its
+// first medium vertex (a scattering, or a fluorescence branch point) lies in the liquid inside a stack of
+// shells that it reached straight from the camera by refraction through every interface of that stack
+// (index-matched interfaces elsewhere do not matter). The light tracer connects exactly those vertices.
+// Documented in docs/model.md, "Fluorescence traced from the lights".
 
 }  // namespace fluorosim
 

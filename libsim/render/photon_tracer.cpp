@@ -19,27 +19,27 @@ struct Tallies {
     std::vector<Accumulator> bins;
 };
 
-struct Photon {
-    Ray ray;
-    int medium = kNone;
-    double lambda = 0;
-    double weight = 0;  // watts carried
-    bool fluorescent = false;
-    double tMin = 0;  // > 0 when the ray starts on the surface it leaves (no offset origin: see path_tracer.cpp)
-};
-
-double lightSpectrumSample(const Spectrum& s, double lambdaMin, double lambdaMax, Rng& rng, double* lambda) {
-    const auto& lines = s.spectralLines();
-    const bool continuous = s.hasContinuousPart();
-    const double pLine = lines.empty() ? 0.0 : (continuous ? 0.5 : 1.0);
-    if (rng.uniform() < pLine) {
-        const size_t i = std::min(lines.size() - 1, static_cast<size_t>(rng.uniform() * static_cast<double>(lines.size())));
-        *lambda = lines[i].lambdaNm;
-        return lines[i].power * static_cast<double>(lines.size()) / pLine;
+// The forward estimator's tallies: the first dye absorption of a light photon, and escaping fluorescence.
+class EscapeTallies final : public PhotonEvents {
+public:
+    EscapeTallies(Tallies& t, const std::vector<double>& binEdges) : t_(t), edges_(binEdges) {}
+    void absorbedByDye(const Photon& ph) override {
+        if (!absorbedOnce_ && !ph.fluorescent) t_.absorbed.add(ph.weight);
+        absorbedOnce_ = true;
     }
-    *lambda = lambdaMin + rng.uniform() * (lambdaMax - lambdaMin);
-    return s(*lambda) * (lambdaMax - lambdaMin) / (1.0 - pLine);
-}
+    void escaped(const Photon& ph) override {
+        if (!ph.fluorescent) return;
+        t_.power.add(ph.weight);
+        t_.powerLambda.add(ph.weight * ph.lambda);
+        for (size_t b = 0; b + 1 < edges_.size(); ++b)
+            if (ph.lambda >= edges_[b] && ph.lambda < edges_[b + 1]) t_.bins[b].add(ph.weight);
+    }
+
+private:
+    Tallies& t_;
+    const std::vector<double>& edges_;
+    bool absorbedOnce_ = false;
+};
 
 class ForwardTracer {
 public:
@@ -55,7 +55,7 @@ public:
         const PointLight& light = *points_[std::min(points_.size() - 1, static_cast<size_t>(rng.uniform() * static_cast<double>(points_.size())))];
         Photon ph;
         ph.weight = static_cast<double>(points_.size()) *
-                    lightSpectrumSample(light.intensity, scene_.spectral.lambdaMin, scene_.spectral.lambdaMax, rng, &ph.lambda);
+                    sampleLightWavelength(light.intensity, scene_.spectral.lambdaMin, scene_.spectral.lambdaMax, rng, &ph.lambda);
         const Vec3 toAim = o_.aimCenter - light.position;
         const double dist = length(toAim);
         if (!(dist > o_.aimRadius)) throw ConfigError("a point light lies inside the aim ball of the forward photon tracer");
@@ -67,97 +67,8 @@ public:
         ph.weight *= 2 * kPi * (1 - cosMax);
         ph.medium = kNone;  // point lights must lie outside every medium
         if (ph.weight == 0) return;
-        bool absorbedOnce = false;
-        for (int events = 0; events < 100000000; ++events) {
-            const auto hit = scene_.geometry.intersect(ph.ray, ph.tMin, std::numeric_limits<double>::infinity());
-            ph.tMin = 0;
-            if (ph.medium != kNone) {
-                const Medium& m = scene_.media[static_cast<size_t>(ph.medium)];
-                // Analog delta tracking at the photon's one wavelength (exact sampling in a homogeneous medium).
-                const MediumSpectra spec = m.spectra(SampledWavelengths::atLine(ph.lambda, 1.0));
-                const double tHit = hit ? hit->t : std::numeric_limits<double>::infinity();
-                ChannelValues ch{};
-                double s = std::numeric_limits<double>::infinity();
-                auto majorants = m.majorants(ph.ray, 0.0, tHit, [&](const double* mx) {
-                    const MediumSample c = spec.at(mx);
-                    return c.sigmaA + c.sigmaS;
-                });
-                sampleTmaj<SampledSpectrum>(majorants, rng, [&](double tCollision, const SampledSpectrum& sigmaMaj, const SampledSpectrum&) {
-                    m.channelValues(ph.ray.at(tCollision), ch.data());
-                    const MediumSample c = spec.at(ch.data());
-                    if (rng.uniform() * sigmaMaj[0] >= c.sigmaA[0] + c.sigmaS[0]) return true;  // null collision
-                    s = tCollision;
-                    return false;
-                });
-                if (std::isfinite(s)) {
-                    const MediumSample c = spec.at(ch.data());
-                    const double sa = c.sigmaA[0], ss = c.sigmaS[0], st = sa + ss;
-                    const Vec3 p = ph.ray.at(s);
-                    if (rng.uniform() * st < ss) {
-                        double pdf = 0;
-                        ph.ray = Ray{p, m.phase().sample(ph.ray.d, rng.uniform(), rng.uniform(), &pdf)};
-                        continue;
-                    }
-                    // Absorbed: by which dye, if any?
-                    double u = rng.uniform() * sa;
-                    const Fluorophore* dye = nullptr;
-                    for (size_t i = 0; i < m.dyes().size(); ++i) {
-                        const double a = dyeAbsorption(m.dyes()[i].dye, ph.lambda, ch[kFirstDyeChannel + i]);
-                        if (u < a) {
-                            dye = &m.dyes()[i].dye;
-                            break;
-                        }
-                        u -= a;
-                    }
-                    if (!dye) return;  // solvent absorption
-                    if (!absorbedOnce && !ph.fluorescent) t.absorbed.add(ph.weight);
-                    absorbedOnce = true;
-                    if (rng.uniform() >= dye->quantumYield()) return;
-                    const auto [lo, hi] = dye->emissionSupport();
-                    const double lambdaNew = lo + rng.uniform() * (hi - lo);
-                    ph.weight *= dye->emissionPdf(lambdaNew) * (hi - lo) * ph.lambda / lambdaNew;
-                    ph.lambda = lambdaNew;
-                    ph.fluorescent = true;
-                    ph.ray = Ray{p, sampleUniformSphere(rng.uniform(), rng.uniform())};
-                    if (ph.weight == 0) return;
-                    continue;
-                }
-                if (!hit) return;  // lost in an unbounded medium
-            }
-            if (!hit) {
-                if (ph.fluorescent) {
-                    t.power.add(ph.weight);
-                    t.powerLambda.add(ph.weight * ph.lambda);
-                    for (size_t b = 0; b + 1 < o_.binEdgesNm.size(); ++b)
-                        if (ph.lambda >= o_.binEdgesNm[b] && ph.lambda < o_.binEdgesNm[b + 1]) t.bins[b].add(ph.weight);
-                }
-                return;
-            }
-            const ShapeInfo& shape = scene_.shapes[hit->shape];
-            if (!shape.isInterface) return;  // opaque surfaces and emitters absorb
-            const bool entering = dot(ph.ray.d, hit->n) < 0;
-            const int next = entering ? shape.insideMedium : shape.outsideMedium;
-            Vec3 dir = ph.ray.d;
-            if (shape.material != kNone) {
-                const Material& mat = *scene_.materials[static_cast<size_t>(shape.material)];
-                if (!(mat.isSpecular() && mat.isTransmissive())) return;  // only smooth dielectrics are modelled
-                const double n1 = scene_.ior(ph.medium), n2 = scene_.ior(next);
-                const Vec3 nFacing = entering ? hit->n : -hit->n;  // on the incident side
-                const double cosI = -dot(ph.ray.d, nFacing);
-                const double R = fresnelDielectric(cosI, n2 / n1);
-                Vec3 wt;
-                if (rng.uniform() < R || !refract(-ph.ray.d, nFacing, n2 / n1, &wt)) {
-                    dir = normalize(ph.ray.d + nFacing * (2 * cosI));
-                    ph.ray = Ray{hit->p, dir};
-                    ph.tMin = hit->epsilon / std::max(std::abs(dot(hit->n, dir)), 1e-2);
-                    continue;
-                }
-                dir = wt;
-            }
-            ph.medium = next;
-            ph.ray = Ray{hit->p, dir};
-            ph.tMin = hit->epsilon / std::max(std::abs(dot(hit->n, dir)), 1e-2);
-        }
+        EscapeTallies tallies(t, o_.binEdgesNm);
+        walkPhoton(scene_, ph, rng, tallies, false);
     }
 
 private:
@@ -167,6 +78,128 @@ private:
 };
 
 }  // namespace
+
+double sampleLightWavelength(const Spectrum& s, double lambdaMin, double lambdaMax, Rng& rng, double* lambda) {
+    const auto& lines = s.spectralLines();
+    const bool continuous = s.hasContinuousPart();
+    const double pLine = lines.empty() ? 0.0 : (continuous ? 0.5 : 1.0);
+    if (rng.uniform() < pLine) {
+        const size_t i = std::min(lines.size() - 1, static_cast<size_t>(rng.uniform() * static_cast<double>(lines.size())));
+        *lambda = lines[i].lambdaNm;
+        return lines[i].power * static_cast<double>(lines.size()) / pLine;
+    }
+    *lambda = lambdaMin + rng.uniform() * (lambdaMax - lambdaMin);
+    return s(*lambda) * (lambdaMax - lambdaMin) / (1.0 - pLine);
+}
+
+void walkPhoton(const Scene& scene, Photon ph, Rng& rng, PhotonEvents& events, bool scatterAtSurfaces) {
+    for (int step = 0; step < 100000000; ++step) {
+        const auto hit = scene.geometry.intersect(ph.ray, ph.tMin, std::numeric_limits<double>::infinity());
+        ph.tMin = 0;
+        if (ph.medium != kNone) {
+            const Medium& m = scene.media[static_cast<size_t>(ph.medium)];
+            // Analog delta tracking at the photon's one wavelength (exact sampling in a homogeneous medium).
+            const MediumSpectra spec = m.spectra(SampledWavelengths::atLine(ph.lambda, 1.0));
+            const double tHit = hit ? hit->t : std::numeric_limits<double>::infinity();
+            ChannelValues ch{};
+            double s = std::numeric_limits<double>::infinity();
+            auto majorants = m.majorants(ph.ray, 0.0, tHit, [&](const double* mx) {
+                const MediumSample c = spec.at(mx);
+                return c.sigmaA + c.sigmaS;
+            });
+            sampleTmaj<SampledSpectrum>(majorants, rng, [&](double tCollision, const SampledSpectrum& sigmaMaj, const SampledSpectrum&) {
+                m.channelValues(ph.ray.at(tCollision), ch.data());
+                const MediumSample c = spec.at(ch.data());
+                if (rng.uniform() * sigmaMaj[0] >= c.sigmaA[0] + c.sigmaS[0]) return true;  // null collision
+                s = tCollision;
+                return false;
+            });
+            if (std::isfinite(s)) {
+                const MediumSample c = spec.at(ch.data());
+                const double sa = c.sigmaA[0], ss = c.sigmaS[0], st = sa + ss;
+                const Vec3 p = ph.ray.at(s);
+                if (rng.uniform() * st < ss) {
+                    events.scattered(ph, p);
+                    double pdf = 0;
+                    ph.ray = Ray{p, m.phase().sample(ph.ray.d, rng.uniform(), rng.uniform(), &pdf)};
+                    continue;
+                }
+                // Absorbed: by which dye, if any?
+                double u = rng.uniform() * sa;
+                const Fluorophore* dye = nullptr;
+                for (size_t i = 0; i < m.dyes().size(); ++i) {
+                    const double a = dyeAbsorption(m.dyes()[i].dye, ph.lambda, ch[kFirstDyeChannel + i]);
+                    if (u < a) {
+                        dye = &m.dyes()[i].dye;
+                        break;
+                    }
+                    u -= a;
+                }
+                if (!dye) return;  // solvent absorption
+                events.absorbedByDye(ph);
+                if (rng.uniform() >= dye->quantumYield()) return;
+                // The new wavelength by the emission spectrum (rejection against its maximum), so that the
+                // power changes only by the energy ratio and a cascade of re-emissions cannot grow it.
+                const auto [lo, hi] = dye->emissionSupport();
+                double lambdaNew = lo;
+                do lambdaNew = lo + rng.uniform() * (hi - lo);
+                while (rng.uniform() * dye->emissionPdfMax() > dye->emissionPdf(lambdaNew));
+                ph.weight *= ph.lambda / lambdaNew;
+                ph.lambda = lambdaNew;
+                ph.fluorescent = true;
+                ph.ray = Ray{p, sampleUniformSphere(rng.uniform(), rng.uniform())};
+                if (ph.weight == 0) return;
+                events.reemitted(ph, p);
+                continue;
+            }
+            if (!hit) return;  // lost in an unbounded medium
+        }
+        if (!hit) {
+            events.escaped(ph);
+            return;
+        }
+        const ShapeInfo& shape = scene.shapes[hit->shape];
+        const bool entering = dot(ph.ray.d, hit->n) < 0;
+        Vec3 dir = ph.ray.d;
+        if (shape.material == kNone) {
+            if (!shape.isInterface) return;  // emitters and absorbers
+            ph.medium = entering ? shape.insideMedium : shape.outsideMedium;
+        } else if (const Material& mat = *scene.materials[static_cast<size_t>(shape.material)];
+                   shape.isInterface && mat.isSpecular() && mat.isTransmissive()) {
+            const int next = entering ? shape.insideMedium : shape.outsideMedium;
+            const double n1 = scene.ior(ph.medium), n2 = scene.ior(next);
+            const Vec3 nFacing = entering ? hit->n : -hit->n;  // on the incident side
+            const double cosI = -dot(ph.ray.d, nFacing);
+            const double R = fresnelDielectric(cosI, n2 / n1);
+            Vec3 wt;
+            if (rng.uniform() < R || !refract(-ph.ray.d, nFacing, n2 / n1, &wt)) {
+                dir = normalize(ph.ray.d + nFacing * (2 * cosI));
+            } else {
+                dir = wt;
+                ph.medium = next;
+            }
+        } else {
+            if (!scatterAtSurfaces) return;
+            // Opaque surfaces are two-sided; interfaces keep their outward orientation (as in the path tracer).
+            const Vec3 n = shape.isInterface ? hit->n : faceForward(hit->n, -ph.ray.d);
+            const double eta = scene.ior(shape.insideMedium) / scene.ior(shape.outsideMedium);
+            const Frame frame = Frame::fromNormal(n);
+            const Vec3 wo = frame.toLocal(-ph.ray.d);
+            if (wo.z == 0) return;
+            const auto bs = mat.sample(wo, rng.uniform(), rng.uniform(), rng.uniform(), SampledWavelengths::atLine(ph.lambda, 1.0), eta,
+                                       TransportMode::Importance);
+            if (!bs || !(bs->pdf > 0)) return;
+            const double factor = bs->f[0] * std::abs(bs->wi.z) / bs->pdf;
+            const double survive = std::min(1.0, factor);
+            if (!(survive > 0) || rng.uniform() >= survive) return;
+            ph.weight *= factor / survive;
+            dir = frame.toWorld(bs->wi);
+            if (shape.isInterface && dot(dir, hit->n) * dot(ph.ray.d, hit->n) > 0) ph.medium = entering ? shape.insideMedium : shape.outsideMedium;
+        }
+        ph.ray = Ray{hit->p, dir};
+        ph.tMin = hit->epsilon / std::max(std::abs(dot(hit->n, dir)), 1e-2);
+    }
+}
 
 void ForwardPhotonOptions::validate() const {
     if (photons == 0 || photons > (uint64_t(1) << 40)) throw ConfigError("photon count must lie in [1, 2^40], got " + std::to_string(photons));

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/rng.h"
 #include "render/tally.h"
 #include "scene/scene.h"
 
@@ -37,5 +38,41 @@ struct ForwardPhotonResult {
 
 // Only point lights are supported (others throw ConfigError); opaque surfaces absorb.
 ForwardPhotonResult traceForwardPhotons(const Scene& scene, const ForwardPhotonOptions& options);
+
+// One analog photon: where it goes, the medium it is in, its wavelength and the power it carries
+// (watts, or W mm² m⁻² where the caller keeps lengths in mm: see render/light_tracer.h).
+struct Photon {
+    Ray ray;
+    int medium = kNone;
+    double lambda = 0;
+    double weight = 0;
+    bool fluorescent = false;  // re-emitted at least once
+    double tMin = 0;           // > 0 when the ray starts on the surface it leaves
+};
+
+// What a photon's walk meets, in order. The default handlers ignore everything.
+class PhotonEvents {
+public:
+    virtual ~PhotonEvents() = default;
+    // A real scattering at p in the photon's medium; ph.ray.d is still the direction it arrived in.
+    virtual void scattered(const Photon& /*ph*/, const Vec3& /*p*/) {}
+    // A dye absorbed the photon at p (before its quantum yield decides whether it re-emits).
+    virtual void absorbedByDye(const Photon& /*ph*/) {}
+    // Re-emitted isotropically at p: ph holds the new wavelength and power.
+    virtual void reemitted(const Photon& /*ph*/, const Vec3& /*p*/) {}
+    // Left the scene.
+    virtual void escaped(const Photon& /*ph*/) {}
+};
+
+// Analog transport of one photon: delta tracking at its wavelength in media (scattering, solvent and dye
+// absorption, re-emission at a wavelength drawn from the dye's emission spectrum with the energy scaled by
+// λ_absorbed/λ_emitted), smooth dielectrics by Fresnel sampling, index-matched interfaces crossed. Other
+// surfaces absorb, or with `scatterAtSurfaces` scatter by their BSDF in importance mode, with Russian
+// roulette on the BSDF's weight, so the photon's power never grows there.
+void walkPhoton(const Scene& scene, Photon ph, Rng& rng, PhotonEvents& events, bool scatterAtSurfaces);
+
+// A wavelength from a light's spectrum (its lines, and its continuous part over [lambdaMin, lambdaMax]):
+// returns the spectrum's value there over the sampling density (a line's power over its probability).
+double sampleLightWavelength(const Spectrum& s, double lambdaMin, double lambdaMax, Rng& rng, double* lambda);
 
 }  // namespace fluorosim

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -41,6 +42,14 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
     options.validate();
     const auto start = std::chrono::steady_clock::now();
     const PathTracer tracer(scene);
+    // Integrator::Light: each pass also traces photons (LightTracer::photonsPerSample per sample per pixel),
+    // whose splats land anywhere in the image, so the film must hold all of it.
+    std::optional<LightTracer> lightTracer;
+    if (scene.render.integrator == Integrator::Light) {
+        if (options.firstRow != 0 || film.height() != scene.camera.height)
+            throw ConfigError("the light integrator renders whole images, not bands of rows (distributed renders): use \"mnee\" there");
+        lightTracer.emplace(scene, tracer);
+    }
     const WavelengthSampler wavelengths = cameraWavelengthSampler(scene, tracer.fluorescence().active());
 
     const Camera& cam = scene.camera;
@@ -61,6 +70,8 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
     ThreadArena threads(options.threads);
     // Each row of a pass is traced into its staged samples and committed only when every row is done.
     std::vector<Film::Row> staged(static_cast<size_t>(rows));
+    PathStart pathStart;
+    pathStart.lightTracedFluorescence = lightTracer.has_value();
     auto cancelled = [&] { return options.cancel && options.cancel->load(std::memory_order_relaxed); };
 
     for (int passStart = options.firstSample; passStart < options.spp; passStart += perPass) {
@@ -84,7 +95,7 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
                     Rng rng = Rng::forKey(options.seed, pixel, static_cast<uint64_t>(s));
                     const SampledWavelengths wl = wavelengths.sample(rng.uniform(), rng.uniform());
                     const Ray ray = cameraRay(cam, x, y, rng.uniform(), rng.uniform());
-                    film.addSample(r, x, tracer.radiance(ray, cam.medium, wl, rng, stats), wl);
+                    film.addSample(r, x, tracer.radiance(ray, cam.medium, wl, rng, stats, pathStart), wl);
                 }
             }
             stagedStats[row] = stats;
@@ -99,7 +110,36 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
             summary.cancelled = true;  // the pass was abandoned: the film keeps the passes before it
             break;
         }
+        // The pass's photons, in batches of fixed photon indices whose splats are committed in order, so the
+        // image does not depend on the thread count either.
+        std::vector<std::vector<FilmSplat>> splats;
+        std::vector<LightTraceStats> batchStats;
+        if (lightTracer) {
+            constexpr uint64_t kBatch = 4096;
+            const double perSample = LightTracer::photonsPerSample(scene);
+            const auto first = static_cast<uint64_t>(passStart * perSample), end = static_cast<uint64_t>(passEnd * perSample);
+            const size_t batches = static_cast<size_t>((end - first + kBatch - 1) / kBatch);
+            splats.resize(batches);
+            batchStats.resize(batches);
+            std::vector<char> batchDone(batches, 0);
+            threads.parallelFor(batches, [&](size_t b) {
+                const uint64_t from = first + b * kBatch, to = std::min(end, from + kBatch);
+                for (uint64_t i = from; i < to; ++i) {
+                    if ((i & 63) == 0 && cancelled()) return;
+                    lightTracer->trace(options.seed, i, perSample, splats[b], batchStats[b]);
+                }
+                batchDone[b] = 1;
+            });
+            if (std::find(batchDone.begin(), batchDone.end(), 0) != batchDone.end()) {
+                summary.cancelled = true;
+                break;
+            }
+        }
         for (int y = 0; y < rows; ++y) film.commit(staged[static_cast<size_t>(y)]);
+        for (size_t b = 0; b < splats.size(); ++b) {
+            for (const FilmSplat& s : splats[b]) film.addSplat(s.x, s.y, s.lambda, s.value);
+            summary.light.add(batchStats[b]);
+        }
         rowStats = std::move(stagedStats);
         summary.sppCompleted = passEnd;
         if (options.passFinished) {

@@ -6,6 +6,7 @@
 #include <functional>
 
 #include "render/film.h"
+#include "render/light_tracer.h"
 #include "render/path_tracer.h"
 
 namespace fluorosim {
@@ -45,6 +46,7 @@ struct RenderSummary {
     uint64_t nonFiniteSamples = 0;
     bool cancelled = false;
     bool timeBudgetSpent = false;  // stopped before `spp` because RenderOptions::timeBudgetSeconds passed
+    LightTraceStats light;         // Integrator::Light: the photons of this call's finished passes
 };
 
 RenderSummary render(const Scene& scene, Film& film, const RenderOptions& options);

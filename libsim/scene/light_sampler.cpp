@@ -8,10 +8,6 @@
 namespace fluorosim {
 namespace {
 
-// Intensities are W sr^-1 nm^-1 and distances mm; radiance is W m^-2 sr^-1 nm^-1, so I / d^2
-// is converted from per mm^2 to per m^2.
-constexpr double kMm2PerM2 = 1e6;
-
 // Cone of directions subtended by a sphere seen from outside (pbrt-v4's Sphere::Sample).
 struct SphereCone {
     double sin2ThetaMax, cosThetaMax, oneMinusCosThetaMax;
@@ -41,12 +37,15 @@ SampledSpectrum LightSampler::emitted(const AreaLight& light, const Vec3& n, con
     return light.emission.radiance.sampleEmission(wl);
 }
 
+double LightSampler::spotFalloff(const SpotLight& light, const Vec3& w) {
+    return smoothStep(dot(w, light.direction), light.cosTotalWidth, light.cosFalloffStart);
+}
+
 SampledSpectrum LightSampler::deltaIntensity(const Light& light, const Vec3& w, const SampledWavelengths& wl, double squaredDistanceMm) {
     const PointLight* pl = std::get_if<PointLight>(&light);
     const SpotLight* sl = std::get_if<SpotLight>(&light);
     if (!pl && !sl) return SampledSpectrum(0.0);
-    // The spot's smoothstep falloff towards its cone edge.
-    const double falloff = sl ? smoothStep(dot(w, sl->direction), sl->cosTotalWidth, sl->cosFalloffStart) : 1.0;
+    const double falloff = sl ? spotFalloff(*sl, w) : 1.0;
     return (pl ? pl->intensity : sl->intensity).sampleEmission(wl) * (falloff * kMm2PerM2 / squaredDistanceMm);
 }
 

@@ -7,6 +7,10 @@
 
 namespace fluorosim {
 
+// Intensities are W sr^-1 nm^-1 and distances mm; radiance is W m^-2 sr^-1 nm^-1, so I / d^2
+// is converted from per mm^2 to per m^2.
+inline constexpr double kMm2PerM2 = 1e6;
+
 struct LightSample {
     Vec3 p;             // point on the light
     Vec3 n;             // its normal (zero for point lights)
@@ -38,6 +42,8 @@ public:
     // A point or spot light's intensity toward direction w (leaving it), times kMm2PerM2, over
     // squaredDistanceMm: at the default 1, the intensity; at a squared distance, LightSample::L there.
     // Zero for other lights.
+    // A spot light's smoothstep falloff towards its cone edge, toward direction w (leaving it).
+    static double spotFalloff(const SpotLight& light, const Vec3& w);
     static SampledSpectrum deltaIntensity(const Light& light, const Vec3& w, const SampledWavelengths& wl, double squaredDistanceMm = 1.0);
 
 private:

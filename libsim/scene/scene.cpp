@@ -14,10 +14,18 @@ std::optional<FluorescenceModel> fluorescenceModelFromName(const std::string& na
 std::optional<Integrator> integratorFromName(const std::string& name) {
     if (name == "path") return Integrator::Path;
     if (name == "mnee") return Integrator::Mnee;
+    if (name == "light") return Integrator::Light;
     return std::nullopt;
 }
 
-const char* integratorName(Integrator integrator) { return integrator == Integrator::Mnee ? "mnee" : "path"; }
+const char* integratorName(Integrator integrator) {
+    switch (integrator) {
+        case Integrator::Mnee: return "mnee";
+        case Integrator::Light: return "light";
+        case Integrator::Path: break;
+    }
+    return "path";
+}
 
 const Spectrum& emissionSpectrum(const Light& light) {
     return std::visit(

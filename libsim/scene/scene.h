@@ -81,8 +81,10 @@ const char* fluorescenceModelName(FluorescenceModel model);
 // How light reaches medium vertices. Path: next-event estimation along straight shadow rays, and
 // phase sampling (the reference). Mnee adds manifold next-event estimation through concentric smooth
 // spherical interfaces (render/specular_chain.h): light behind a glass shell reaches the medium inside.
-enum class Integrator { Path, Mnee };
-// "path" or "mnee"; nullopt for anything else.
+// Light is Mnee for the elastic light, and traces the fluorescence seen through glass spheres from the
+// lights (render/light_tracer.h): photons connect to the camera through the glass from every vertex.
+enum class Integrator { Path, Mnee, Light };
+// "path", "mnee" or "light"; nullopt for anything else.
 std::optional<Integrator> integratorFromName(const std::string& name);
 const char* integratorName(Integrator integrator);
 
@@ -92,6 +94,7 @@ struct RenderSettings {
     int spp = 16;
     int maxDepth = 100000;  // a safety cap; paths that hit it are counted, never silently
     uint64_t seed = 1;
+    int photonsPerPixel = 1;  // Integrator::Light: photons traced per sample per pixel of the image
 };
 
 struct Scene {

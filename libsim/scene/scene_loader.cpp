@@ -330,10 +330,10 @@ private:
     }
 
     void loadRender(const Node& n, Scene& scene) {
-        n.allowOnly({"spp", "max_depth", "seed", "fluorescence", "integrator"});
+        n.allowOnly({"spp", "max_depth", "seed", "fluorescence", "integrator", "photons_per_pixel"});
         if (n.has("integrator")) {
             const auto integrator = integratorFromName(n.at("integrator").str());
-            if (!integrator) n.at("integrator").fail("expected \"path\" or \"mnee\"");
+            if (!integrator) n.at("integrator").fail("expected \"path\", \"mnee\" or \"light\"");
             scene.render.integrator = *integrator;
         }
         if (n.has("fluorescence")) {
@@ -342,6 +342,7 @@ private:
             scene.render.fluorescence = *model;
         }
         if (n.has("spp")) scene.render.spp = n.at("spp").integer(1, 1 << 24);
+        if (n.has("photons_per_pixel")) scene.render.photonsPerPixel = n.at("photons_per_pixel").integer(1, 4096);
         if (n.has("max_depth")) scene.render.maxDepth = n.at("max_depth").integer(1, 100000000);
         if (n.has("seed")) scene.render.seed = static_cast<uint64_t>(n.at("seed").integer(0, 2147483647));
     }

@@ -255,7 +255,7 @@ TEST(Cli, UnknownIntegratorIsRefusedFromTheCommandLineAndTheScene) {
     const auto scene = dir.write("scene.json", sceneJson(8, 8, 1));
     const auto r = runCli(dir, {"render", scene.string(), "-o", (dir.path() / "o.exr").string(), "--integrator", "bdpt"});
     EXPECT_EQ(r.exitCode, 2);
-    expectOneLineError(r, {"--integrator", "path or mnee", "bdpt"});
+    expectOneLineError(r, {"--integrator", "path, mnee or light", "bdpt"});
     json j = json::parse(readFile(scene));
     j["render"]["integrator"] = "photons";
     const auto bad = dir.write("bad.json", j.dump());
@@ -266,6 +266,13 @@ TEST(Cli, UnknownIntegratorIsRefusedFromTheCommandLineAndTheScene) {
     const auto ok = runCli(dir, {"render", scene.string(), "-o", (dir.path() / "o.exr").string(), "--integrator", "mnee"});
     ASSERT_EQ(ok.exitCode, 0) << ok.err;
     EXPECT_EQ(json::parse(ok.out).at("integrator").get<std::string>(), "mnee");
+    // Photons per pixel are checked where the scene gives them.
+    j = json::parse(readFile(scene));
+    j["render"]["photons_per_pixel"] = 0;
+    const auto zero = dir.write("zero.json", j.dump());
+    const auto z = runCli(dir, {"render", zero.string(), "-o", (dir.path() / "o.exr").string()});
+    EXPECT_EQ(z.exitCode, 2);
+    expectOneLineError(z, {zero.string(), "/render/photons_per_pixel", "got 0"});
 }
 
 TEST(Cli, InterruptBySigintIsHandledLikeSigterm) {

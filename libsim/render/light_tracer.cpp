@@ -1,0 +1,196 @@
+#include "render/light_tracer.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/errors.h"
+#include "core/math.h"
+#include "core/rng.h"
+#include "core/sampling.h"
+#include "render/photon_tracer.h"
+#include "render/specular_chain.h"
+#include "scene/light_sampler.h"
+
+namespace fluorosim {
+namespace {
+
+// A connection is made with probability min(1, kConnectAt e^(-σt d)), d the vertex's depth below the
+// liquid's surface (the chain's first segment is at least that long, so its transmittance is at most
+// e^(-σt d)), and divided by that probability: deep vertices, whose chains carry almost nothing, are
+// mostly skipped, and a made connection weighs at most 1/kConnectAt of an unattenuated one.
+constexpr double kConnectAt = 8;
+
+double spectralPower(const Spectrum& s, const Scene& scene) { return s.integral(scene.spectral.lambdaMin, scene.spectral.lambdaMax); }
+
+// Connects the vertices of re-emitted photons in a stack's liquid to the camera through the stack.
+class CameraConnections final : public PhotonEvents {
+public:
+    CameraConnections(const Scene& scene, const PathTracer& tracer, double pixelArea, double photonsPerSample, Rng& rng,
+                      std::vector<FilmSplat>& out, LightTraceStats& stats)
+        : scene_(scene), tracer_(tracer), pixelArea_(pixelArea), perSample_(photonsPerSample), rng_(rng), out_(out), stats_(stats) {}
+
+    void scattered(const Photon& ph, const Vec3& p) override {
+        if (!ph.fluorescent) return;
+        const HenyeyGreenstein& phase = scene_.media[static_cast<size_t>(ph.medium)].phase();
+        connect(ph, p, [&](const Vec3& w) { return phase.pdf(ph.ray.d, w); });
+    }
+    void reemitted(const Photon& ph, const Vec3& p) override {
+        connect(ph, p, [](const Vec3&) { return 1 / (4 * kPi); });
+    }
+
+private:
+    template <class Phase>
+    void connect(const Photon& ph, const Vec3& p, Phase&& phaseValue) {
+        const auto& stacks = tracer_.shells();
+        const SphericalShells* sh = nullptr;
+        for (const SphericalShells& s : stacks)
+            if (s.medium[0] == ph.medium && length(p - s.center) < s.radius[0]) sh = &s;
+        if (!sh) return;
+        const SampledWavelengths wl = SampledWavelengths::atLine(ph.lambda, 1.0);
+        double keep = 1;
+        const Medium& m = scene_.media[static_cast<size_t>(ph.medium)];
+        if (m.isHomogeneous()) {
+            ChannelValues ch{};
+            m.channelValues(p, ch.data());
+            const MediumSample c = m.spectra(wl).at(ch.data());
+            keep = std::min(1.0, kConnectAt * std::exp(-(c.sigmaA[0] + c.sigmaS[0]) * (sh->radius[0] - length(p - sh->center))));
+            if (rng_.uniform() >= keep) return;
+        }
+        const Camera& cam = scene_.camera;
+        std::array<ShellPath, 4> roots;
+        const int count = shellPaths(*sh, p, cam.position, roots);
+        for (int k = 0; k < count; ++k) {
+            const ShellPath& r = roots[static_cast<size_t>(k)];
+            ++stats_.connections;
+            const double f = phaseValue(r.direction);
+            if (!(f > 0)) continue;
+            // The pixel that sees the chain's last point (cameraRay inverted).
+            const Vec3 w = -r.exitDirection;
+            const double z = dot(w, cam.frame.n);
+            if (!(z > 0)) continue;
+            const double aspect = static_cast<double>(cam.width) / cam.height;
+            const double px = (dot(w, cam.frame.s) / z / (cam.tanHalfFovY * aspect) + 1) * 0.5 * cam.width;
+            const double py = (1 - dot(w, cam.frame.t) / z / cam.tanHalfFovY) * 0.5 * cam.height;
+            if (!(px >= 0 && px < cam.width && py >= 0 && py < cam.height)) continue;
+            const double dAdw = areaPerSolidAngle(*sh, p, r, cam.position, r.exitDirection);
+            if (!(dAdw > 0)) continue;
+            double T = 1;
+            Vec3 from = p, normal;
+            double eps = 0;
+            for (int i = 0; i <= sh->count && T > 0; ++i) {
+                const Vec3 to = i < sh->count ? r.points[static_cast<size_t>(i)] : cam.position;
+                T *= tracer_.transmittance(from, to, sh->medium[static_cast<size_t>(i)], wl, rng_, i > 0 ? &normal : nullptr, eps)[0];
+                normal = normalize(to - sh->center);
+                eps = sphereRayEpsilon(to);
+                from = to;
+            }
+            if (!(T > 0)) continue;
+            // The pinhole's importance for one pixel, 1 / (A_pixel cos³θ), and the generalized geometry term
+            // 1 / (dA⊥ at the camera per dω at p): the indices of refraction cancel (docs/model.md).
+            const double importance = 1 / (pixelArea_ * z * z * z);
+            const double value = ph.weight * f * T * r.fresnel * importance / (dAdw * keep * perSample_);
+            out_.push_back(FilmSplat{static_cast<int32_t>(px), static_cast<int32_t>(py), ph.lambda, value});
+        }
+    }
+
+    const Scene& scene_;
+    const PathTracer& tracer_;
+    double pixelArea_, perSample_;
+    Rng& rng_;
+    std::vector<FilmSplat>& out_;
+    LightTraceStats& stats_;
+};
+
+}  // namespace
+
+LightTracer::LightTracer(const Scene& scene, const PathTracer& tracer) : scene_(scene), tracer_(tracer) {
+    if (scene.render.fluorescence == FluorescenceModel::Paper)
+        throw ConfigError("the light integrator traces the full fluorescence model; the paper's model needs \"path\" or \"mnee\"");
+    const Camera& cam = scene.camera;
+    if (cam.medium != kNone) throw ConfigError("the light integrator needs the camera outside every medium");
+    for (const SphericalShells& s : tracer.shells())
+        if (length(cam.position - s.center) <= s.radius[static_cast<size_t>(s.count - 1)])
+            throw ConfigError("the light integrator needs the camera outside every glass sphere");
+    const double aspect = static_cast<double>(cam.width) / cam.height;
+    pixelArea_ = (2 * cam.tanHalfFovY * aspect / cam.width) * (2 * cam.tanHalfFovY / cam.height);
+    std::vector<double> power;
+    for (const Light& l : scene.lights) {
+        double p = 0;
+        if (const auto* a = std::get_if<AreaLight>(&l)) {
+            p = spectralPower(a->emission.radiance, scene) * scene.geometry.area(a->shape) * kPi * (a->emission.twoSided ? 2 : 1);
+        } else if (const auto* pl = std::get_if<PointLight>(&l)) {
+            p = spectralPower(pl->intensity, scene) * 4 * kPi * kMm2PerM2;
+        } else if (const auto* sl = std::get_if<SpotLight>(&l)) {
+            p = spectralPower(sl->intensity, scene) * 2 * kPi * (1 - sl->cosTotalWidth) * kMm2PerM2;
+        } else {
+            throw ConfigError("the light integrator does not trace beams (light sheets); use \"path\" or \"mnee\"");
+        }
+        power.push_back(std::max(0.0, p));
+    }
+    double total = 0;
+    for (double p : power) total += p;
+    if (!(total > 0)) throw ConfigError("the light integrator needs a light that emits inside the spectral range");
+    double cdf = 0;
+    for (size_t i = 0; i < power.size(); ++i) {
+        cdf += power[i] / total;
+        emitters_.push_back({&scene.lights[i], i + 1 == power.size() ? 1.0 : cdf});
+    }
+}
+
+void LightTracer::trace(uint64_t seed, uint64_t index, double photonsPerSample, std::vector<FilmSplat>& out, LightTraceStats& stats) const {
+    ++stats.photons;
+    Rng rng = Rng::forKey(seed, index, 0x6c696768);
+    const double u = rng.uniform();
+    const auto it = std::find_if(emitters_.begin(), emitters_.end(), [&](const Emitter& e) { return u < e.cdf; });
+    const Emitter& e = it == emitters_.end() ? emitters_.back() : *it;
+    const double pSelect = e.cdf - (&e == &emitters_.front() ? 0.0 : (&e - 1)->cdf);
+    if (!(pSelect > 0)) return;
+    Photon ph;
+    const double lo = scene_.spectral.lambdaMin, hi = scene_.spectral.lambdaMax;
+    if (const auto* a = std::get_if<AreaLight>(e.light)) {
+        // A point by area on the emitting shape, a cosine-distributed direction on its emitting side.
+        Vec3 p, n;
+        const uint32_t shape = a->shape;
+        const double u1 = rng.uniform(), u2 = rng.uniform();
+        if (scene_.geometry.isSphere(shape)) {
+            n = sampleUniformSphere(u1, u2);
+            p = scene_.geometry.sphereCenter(shape) + n * scene_.geometry.sphereRadius(shape);
+        } else {
+            const TriangleMesh& m = scene_.geometry.mesh(shape);
+            const auto t = std::lower_bound(a->triangleCdf.begin(), a->triangleCdf.end(), u1);
+            const size_t tri = std::min(static_cast<size_t>(t - a->triangleCdf.begin()), a->triangleCdf.size() - 1);
+            const double prev = tri == 0 ? 0.0 : a->triangleCdf[tri - 1];
+            const auto b = sampleUniformTriangle(std::clamp((u1 - prev) / std::max(a->triangleCdf[tri] - prev, 1e-300), 0.0, 1.0), u2);
+            const Vec3 &v0 = m.positions[m.indices[3 * tri]], &v1 = m.positions[m.indices[3 * tri + 1]], &v2 = m.positions[m.indices[3 * tri + 2]];
+            p = v0 * b[0] + v1 * b[1] + v2 * (1 - b[0] - b[1]);
+            n = normalize(cross(v1 - v0, v2 - v0));
+        }
+        double sides = 1;
+        if (a->emission.twoSided) {
+            sides = 2;
+            if (rng.uniform() < 0.5) n = -n;
+        }
+        const Vec3 local = sampleCosineHemisphere(rng.uniform(), rng.uniform());
+        const Vec3 dir = Frame::fromNormal(n).toWorld(local);
+        ph.weight = sampleLightWavelength(a->emission.radiance, lo, hi, rng, &ph.lambda) * scene_.geometry.area(shape) * kPi * sides / pSelect;
+        ph.ray = Ray{p, dir};
+        const ShapeInfo& info = scene_.shapes[shape];
+        ph.medium = info.isInterface ? (dot(dir, n) > 0 ? info.outsideMedium : info.insideMedium) : kNone;
+        ph.tMin = (scene_.geometry.isSphere(shape) ? sphereRayEpsilon(p) : rayEpsilon(p)) / std::max(local.z, 1e-2);
+    } else if (const auto* pl = std::get_if<PointLight>(e.light)) {
+        ph.weight = sampleLightWavelength(pl->intensity, lo, hi, rng, &ph.lambda) * 4 * kPi * kMm2PerM2 / pSelect;
+        ph.ray = Ray{pl->position, sampleUniformSphere(rng.uniform(), rng.uniform())};
+    } else if (const auto* sl = std::get_if<SpotLight>(e.light)) {
+        const double cosT = 1 - rng.uniform() * (1 - sl->cosTotalWidth), phi = 2 * kPi * rng.uniform();
+        const double sinT = std::sqrt(std::max(0.0, 1 - cosT * cosT));
+        const Vec3 dir = Frame::fromNormal(sl->direction).toWorld(Vec3(sinT * std::cos(phi), sinT * std::sin(phi), cosT));
+        ph.weight = sampleLightWavelength(sl->intensity, lo, hi, rng, &ph.lambda) * LightSampler::spotFalloff(*sl, dir) * 2 * kPi *
+                    (1 - sl->cosTotalWidth) * kMm2PerM2 / pSelect;
+        ph.ray = Ray{sl->position, dir};
+    }
+    if (!(ph.weight > 0)) return;
+    CameraConnections connections(scene_, tracer_, pixelArea_, photonsPerSample, rng, out, stats);
+    walkPhoton(scene_, ph, rng, connections, true);
+}
+
+}  // namespace fluorosim

@@ -1,0 +1,197 @@
+// Fluorescence traced from the lights (Integrator::Light): a scattering liquid dyed with AF488 in a glass
+// sphere, lit from above by a lamp of one line at 495 nm, rendered onto a small image. Its fluorescent
+// layer, summed over the four quadrants of the image, against the same render with manifold next-event
+// estimation (Integrator::Mnee, whose camera paths find all of it themselves), from independent seeds:
+// z-scores from the spread of the seeds, fixed seeds. Controls: glass and liquid of index 1 (the chains
+// are straight lines), a point light (nothing but chains reaches it), a diffuse floor under the sphere
+// (photons that bounce off a surface before or after the dye).
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "core/errors.h"
+#include "render/renderer.h"
+#include "support/fluorescent_scenes.h"
+#include "support/test_scenes.h"
+
+namespace fluorosim {
+namespace {
+
+using testing::addInterfaceSphere;
+using testing::addMedium;
+using testing::flatCmf;
+
+struct SphereScene {
+    double liquidIor = 1.33, glassIor = 1.5;
+    bool pointLight = false;
+    bool floor = false;
+    Integrator integrator = Integrator::Light;
+};
+
+Scene sphereScene(const SphereScene& o) {
+    Scene scene;
+    scene.spectral = {400, 700, 20};
+    const int liquid = testing::addDyedMedium(scene, "liquid", 0.0, 2.0, 0.3, o.liquidIor, {{testing::databaseDye("AF488"), 20e-6}});
+    const int glass = addMedium(scene, "glass", 0.0, 0.0, 0.0, o.glassIor);
+    scene.materials.push_back(makeDielectric(0.0));
+    addInterfaceSphere(scene, Vec3(0, 0, 0), 1.0, liquid, glass, 0);
+    addInterfaceSphere(scene, Vec3(0, 0, 0), 1.2, glass, kNone, 0);
+    const Vec3 lampAt(0.2, 2.0, 0.1);
+    if (o.pointLight) {
+        scene.lights.push_back(PointLight{lampAt, Spectrum::lines({{495.0, 10.0 * kPi * sqr(0.3e-3)}})});
+    } else {
+        const uint32_t lamp = scene.geometry.addSphere(lampAt, 0.3);
+        ShapeInfo info;
+        info.name = "lamp";
+        scene.shapes.push_back(info);
+        scene.addAreaLight(lamp, AreaEmission{Spectrum::lines({{495.0, 10.0}}), false});
+    }
+    if (o.floor) {
+        scene.materials.push_back(makeDiffuse(Spectrum::constant(0.8)));
+        TriangleMesh m;
+        m.positions = {Vec3(-4, -1.3, -4), Vec3(4, -1.3, -4), Vec3(4, -1.3, 4), Vec3(-4, -1.3, 4)};
+        m.indices = {0, 2, 1, 0, 3, 2};
+        scene.geometry.addMesh(std::move(m));
+        ShapeInfo info;
+        info.name = "floor";
+        info.material = 1;
+        scene.shapes.push_back(info);
+    }
+    scene.camera.position = Vec3(0, 0.4, -5);
+    scene.camera.frame = Frame::fromNormal(normalize(Vec3(0, 0, 0) - scene.camera.position));
+    scene.camera.tanHalfFovY = 0.3;
+    scene.camera.width = scene.camera.height = 16;
+    scene.render.integrator = o.integrator;
+    scene.render.photonsPerPixel = 16;
+    scene.finalize();
+    return scene;
+}
+
+// The fluorescent layer's total over each quadrant of the image (spectral radiance summed over pixels and bins).
+std::array<double, 4> quadrants(const Scene& scene, int spp, uint64_t seed) {
+    Film film(scene.camera.width, scene.camera.height, scene.spectral.lambdaMin, scene.spectral.lambdaMax, scene.spectral.binWidth, flatCmf(), true);
+    RenderOptions o;
+    o.spp = spp;
+    o.seed = seed;
+    o.sppPerPass = 0;
+    render(scene, film, o);
+    const ExrImage img = film.image(spp);
+    const SpectralLayer* layer = nullptr;
+    for (const SpectralLayer& l : img.spectral)
+        if (l.prefix == "fluorescent") layer = &l;
+    EXPECT_NE(layer, nullptr);
+    std::array<double, 4> q{};
+    const size_t pixels = static_cast<size_t>(img.width) * static_cast<size_t>(img.height);
+    for (size_t b = 0; b < layer->wavelengthsNm.size(); ++b)
+        for (size_t p = 0; p < pixels; ++p) {
+            const int x = static_cast<int>(p % static_cast<size_t>(img.width)), y = static_cast<int>(p / static_cast<size_t>(img.width));
+            q[static_cast<size_t>((y >= img.height / 2) * 2 + (x >= img.width / 2))] += layer->values[b * pixels + p];
+        }
+    return q;
+}
+
+struct QuadrantEstimate {
+    std::array<double, 4> mean{}, stderr_{};
+};
+
+// Mean and standard error over `seeds` independent renders.
+QuadrantEstimate estimate(const Scene& scene, int spp, int seeds, uint64_t firstSeed) {
+    std::array<double, 4> s{}, s2{};
+    for (int k = 0; k < seeds; ++k) {
+        const auto q = quadrants(scene, spp, firstSeed + static_cast<uint64_t>(k));
+        for (size_t i = 0; i < 4; ++i) {
+            s[i] += q[i];
+            s2[i] += q[i] * q[i];
+        }
+    }
+    QuadrantEstimate e;
+    for (size_t i = 0; i < 4; ++i) {
+        e.mean[i] = s[i] / seeds;
+        e.stderr_[i] = std::sqrt(std::max(0.0, s2[i] / seeds - sqr(e.mean[i])) / (seeds - 1));
+    }
+    return e;
+}
+
+void expectAgreement(const QuadrantEstimate& light, const QuadrantEstimate& reference) {
+    for (size_t i = 0; i < 4; ++i) {
+        char buf[128];
+        std::snprintf(buf, sizeof buf, "quadrant %zu: light %.4g +- %.2g, mnee %.4g +- %.2g", i, light.mean[i], light.stderr_[i], reference.mean[i],
+                      reference.stderr_[i]);
+        ::testing::Test::RecordProperty("quadrant" + std::to_string(i), buf);
+        ASSERT_GT(reference.mean[i], 0) << buf;
+        const double z = (light.mean[i] - reference.mean[i]) / std::sqrt(sqr(light.stderr_[i]) + sqr(reference.stderr_[i]));
+        EXPECT_LT(std::abs(z), 4.0) << buf;
+    }
+}
+
+QuadrantEstimate both(SphereScene o, int sppLight, int sppMnee, QuadrantEstimate* reference) {
+    o.integrator = Integrator::Mnee;
+    *reference = estimate(sphereScene(o), sppMnee, 8, 100);
+    o.integrator = Integrator::Light;
+    return estimate(sphereScene(o), sppLight, 8, 200);
+}
+
+TEST(LightTracer, FluorescenceBehindGlassAgreesWithManifoldNextEventEstimation) {
+    QuadrantEstimate mnee;
+    const QuadrantEstimate light = both({}, 16, 64, &mnee);
+    expectAgreement(light, mnee);
+}
+
+TEST(LightTracer, IndexOneGlassAgreesWithManifoldNextEventEstimation) {
+    SphereScene o;
+    o.liquidIor = o.glassIor = 1.0;
+    QuadrantEstimate mnee;
+    expectAgreement(both(o, 16, 64, &mnee), mnee);
+}
+
+TEST(LightTracer, PointLightBehindGlassAgreesWithManifoldNextEventEstimation) {
+    SphereScene o;
+    o.pointLight = true;
+    QuadrantEstimate mnee;
+    expectAgreement(both(o, 16, 64, &mnee), mnee);
+}
+
+TEST(LightTracer, PhotonsThatBounceOffAFloorAgreeWithManifoldNextEventEstimation) {
+    SphereScene o;
+    o.floor = true;
+    QuadrantEstimate mnee;
+    expectAgreement(both(o, 16, 64, &mnee), mnee);
+}
+
+TEST(LightTracer, RefusesWhatItCannotTrace) {
+    SphereScene o;
+    Scene scene = sphereScene(o);
+    Film band(16, 8, 400, 700, 20, flatCmf(), true);
+    RenderOptions opt;
+    opt.spp = 1;
+    EXPECT_THROW(render(scene, band, opt), ConfigError);
+    scene.render.fluorescence = FluorescenceModel::Paper;
+    Film film(16, 16, 400, 700, 20, flatCmf(), true);
+    EXPECT_THROW(render(scene, film, opt), ConfigError);
+}
+
+// The image does not depend on the thread count: photon batches commit their splats in order.
+TEST(LightTracer, SameImageForAnyThreadCount) {
+    const Scene scene = sphereScene({});
+    auto image = [&](int threads) {
+        Film film(16, 16, 400, 700, 20, flatCmf(), true);
+        RenderOptions opt;
+        opt.spp = 4;
+        opt.threads = threads;
+        opt.sppPerPass = 2;
+        render(scene, film, opt);
+        return film.image(opt.spp).rgb;
+    };
+    const auto one = image(1);
+    EXPECT_EQ(one, image(2));
+    double sum = 0;
+    for (float v : one) sum += v;
+    EXPECT_GT(sum, 0.0);
+}
+
+}  // namespace
+}  // namespace fluorosim
