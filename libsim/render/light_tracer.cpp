@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include "core/errors.h"
 #include "core/math.h"
@@ -37,8 +38,42 @@ public:
     void reemitted(const Photon& ph, const Vec3& p) override {
         connect(ph, p, [](const Vec3&) { return 1 / (4 * kPi); });
     }
+    // Re-emitted light on an opaque, non-specular surface, seen straight from the camera.
+    void surfaceScattered(const Photon& ph, const SurfaceHit& hit, const Vec3& n, const Material& mat, double eta) override {
+        if (!ph.fluorescent || mat.isSpecular() || mat.isTransmissive()) return;
+        const Camera& cam = scene_.camera;
+        const Vec3 toCamera = cam.position - hit.p;
+        const double d2 = dot(toCamera, toCamera);
+        const Vec3 wCamera = toCamera / std::sqrt(d2);
+        const auto pixel = pixelSeeing(-wCamera);
+        if (!pixel) return;
+        ++stats_.connections;
+        const SampledWavelengths wl = SampledWavelengths::atLine(ph.lambda, 1.0);
+        const Frame frame = Frame::fromNormal(n);
+        const double f = mat.f(frame.toLocal(wCamera), frame.toLocal(-ph.ray.d), wl, eta, TransportMode::Radiance)[0] * std::abs(dot(n, wCamera));
+        if (!(f > 0)) return;
+        const double T = tracer_.transmittance(hit.p, cam.position, ph.medium, wl, rng_, &hit.n, hit.epsilon)[0];
+        if (!(T > 0)) return;
+        out_.push_back(FilmSplat{pixel->x, pixel->y, ph.lambda, ph.weight * f * T * pixel->importance / (d2 * perSample_)});
+    }
 
 private:
+    struct Pixel {
+        int32_t x, y;
+        double importance;  // the pinhole's for one pixel: 1 / (A_pixel cos³θ)
+    };
+    // The pixel whose camera ray leaves along unit w (cameraRay inverted), if any.
+    std::optional<Pixel> pixelSeeing(const Vec3& w) const {
+        const Camera& cam = scene_.camera;
+        const double z = dot(w, cam.frame.n);
+        if (!(z > 0)) return std::nullopt;
+        const double aspect = static_cast<double>(cam.width) / cam.height;
+        const double px = (dot(w, cam.frame.s) / z / (cam.tanHalfFovY * aspect) + 1) * 0.5 * cam.width;
+        const double py = (1 - dot(w, cam.frame.t) / z / cam.tanHalfFovY) * 0.5 * cam.height;
+        if (!(px >= 0 && px < cam.width && py >= 0 && py < cam.height)) return std::nullopt;
+        return Pixel{static_cast<int32_t>(px), static_cast<int32_t>(py), 1 / (pixelArea_ * z * z * z)};
+    }
+
     template <class Phase>
     void connect(const Photon& ph, const Vec3& p, Phase&& phaseValue) {
         const auto& stacks = tracer_.shells();
@@ -56,40 +91,33 @@ private:
             keep = std::min(1.0, kConnectAt * std::exp(-(c.sigmaA[0] + c.sigmaS[0]) * (sh->radius[0] - length(p - sh->center))));
             if (rng_.uniform() >= keep) return;
         }
-        const Camera& cam = scene_.camera;
+        const Vec3 camera = scene_.camera.position;
         std::array<ShellPath, 4> roots;
-        const int count = shellPaths(*sh, p, cam.position, roots);
+        const int count = shellPaths(*sh, p, camera, roots);
         for (int k = 0; k < count; ++k) {
             const ShellPath& r = roots[static_cast<size_t>(k)];
             ++stats_.connections;
             const double f = phaseValue(r.direction);
             if (!(f > 0)) continue;
-            // The pixel that sees the chain's last point (cameraRay inverted).
-            const Vec3 w = -r.exitDirection;
-            const double z = dot(w, cam.frame.n);
-            if (!(z > 0)) continue;
-            const double aspect = static_cast<double>(cam.width) / cam.height;
-            const double px = (dot(w, cam.frame.s) / z / (cam.tanHalfFovY * aspect) + 1) * 0.5 * cam.width;
-            const double py = (1 - dot(w, cam.frame.t) / z / cam.tanHalfFovY) * 0.5 * cam.height;
-            if (!(px >= 0 && px < cam.width && py >= 0 && py < cam.height)) continue;
-            const double dAdw = areaPerSolidAngle(*sh, p, r, cam.position, r.exitDirection);
+            const auto pixel = pixelSeeing(-r.exitDirection);
+            if (!pixel) continue;
+            const double dAdw = areaPerSolidAngle(*sh, p, r, camera, r.exitDirection);
             if (!(dAdw > 0)) continue;
             double T = 1;
             Vec3 from = p, normal;
             double eps = 0;
             for (int i = 0; i <= sh->count && T > 0; ++i) {
-                const Vec3 to = i < sh->count ? r.points[static_cast<size_t>(i)] : cam.position;
+                const Vec3 to = i < sh->count ? r.points[static_cast<size_t>(i)] : camera;
                 T *= tracer_.transmittance(from, to, sh->medium[static_cast<size_t>(i)], wl, rng_, i > 0 ? &normal : nullptr, eps)[0];
                 normal = normalize(to - sh->center);
                 eps = sphereRayEpsilon(to);
                 from = to;
             }
             if (!(T > 0)) continue;
-            // The pinhole's importance for one pixel, 1 / (A_pixel cos³θ), and the generalized geometry term
-            // 1 / (dA⊥ at the camera per dω at p): the indices of refraction cancel (docs/model.md).
-            const double importance = 1 / (pixelArea_ * z * z * z);
-            const double value = ph.weight * f * T * r.fresnel * importance / (dAdw * keep * perSample_);
-            out_.push_back(FilmSplat{static_cast<int32_t>(px), static_cast<int32_t>(py), ph.lambda, value});
+            // The generalized geometry term is 1 / (dA⊥ at the camera per dω at p): the indices of refraction
+            // cancel against the radiance's n² (docs/model.md).
+            const double value = ph.weight * f * T * r.fresnel * pixel->importance / (dAdw * keep * perSample_);
+            out_.push_back(FilmSplat{pixel->x, pixel->y, ph.lambda, value});
         }
     }
 

@@ -1042,6 +1042,12 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         st.sheetSampledAtLastVertex = false;
         st.emissionSampledAtLastVertex = false;
         const Material& mat = *scene_.materials[static_cast<size_t>(shape.material)];
+        // An opaque, non-specular surface seen straight from the camera: the light tracer connects its
+        // re-emitted light to the camera, so the whole path's fluorescence is the light tracer's.
+        if (st.cameraPrefix && st.enterShells < 0 && !mat.isSpecular() && !mat.isTransmissive()) {
+            st.fluorescenceCovered = true;
+            st.cameraPrefix = false;
+        }
         // Opaque surfaces are two-sided; interfaces keep their outward orientation.
         const Vec3 n = shape.isInterface ? hit->n : faceForward(hit->n, -ray.d);
         const double eta = scene_.ior(shape.insideMedium) / scene_.ior(shape.outsideMedium);

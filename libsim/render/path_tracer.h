@@ -221,8 +221,9 @@ private:
 
 // Whether a camera path with Integrator::Light leaves its fluorescence to the light tracer: it does when its
 // first medium vertex (a scattering, or a fluorescence branch point) lies in the liquid inside a stack of
-// shells that it reached straight from the camera by refraction through every interface of that stack
-// (index-matched interfaces elsewhere do not matter). The light tracer connects exactly those vertices.
+// shells that it reached straight from the camera by refraction through every interface of that stack, or
+// when its first vertex is an opaque, non-specular surface seen straight from the camera (index-matched
+// interfaces on the way do not matter). The light tracer connects exactly those vertices.
 // Documented in docs/model.md, "Fluorescence traced from the lights".
 
 }  // namespace fluorosim

@@ -186,6 +186,7 @@ void walkPhoton(const Scene& scene, Photon ph, Rng& rng, PhotonEvents& events, b
             const Frame frame = Frame::fromNormal(n);
             const Vec3 wo = frame.toLocal(-ph.ray.d);
             if (wo.z == 0) return;
+            events.surfaceScattered(ph, *hit, n, mat, eta);
             const auto bs = mat.sample(wo, rng.uniform(), rng.uniform(), rng.uniform(), SampledWavelengths::atLine(ph.lambda, 1.0), eta,
                                        TransportMode::Importance);
             if (!bs || !(bs->pdf > 0)) return;

@@ -58,6 +58,9 @@ public:
     virtual void scattered(const Photon& /*ph*/, const Vec3& /*p*/) {}
     // A dye absorbed the photon at p (before its quantum yield decides whether it re-emits).
     virtual void absorbedByDye(const Photon& /*ph*/) {}
+    // About to scatter off a surface by its BSDF (walkPhoton's scatterAtSurfaces): n is the normal on the
+    // side the photon arrives from (opaque surfaces) or the outward one (interfaces), eta as Material takes it.
+    virtual void surfaceScattered(const Photon& /*ph*/, const SurfaceHit& /*hit*/, const Vec3& /*n*/, const Material& /*mat*/, double /*eta*/) {}
     // Re-emitted isotropically at p: ph holds the new wavelength and power.
     virtual void reemitted(const Photon& /*ph*/, const Vec3& /*p*/) {}
     // Left the scene.
