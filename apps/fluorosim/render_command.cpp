@@ -273,8 +273,9 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_option("--fluorescence", args->fluorescence,
                     "Fluorescence model: full (unbiased, default), paper (Abdellah et al.: one event, direct light) or none");
     cmd->add_option("--integrator", args->integrator,
-                    "path (the reference: straight shadow rays and phase sampling) or mnee (adds manifold next-event estimation "
-                    "through glass spheres; default: the scene's render.integrator)");
+                    "path (the reference: straight shadow rays and phase sampling), mnee (adds manifold next-event estimation "
+                    "through glass spheres) or light (mnee, and the fluorescence seen through glass spheres traced from the lights); "
+                    "default: the scene's render.integrator");
     cmd->add_option("--checkpoint-seconds", args->checkpointSeconds, "Write the image every this many seconds");
     cmd->add_option("--time", args->time,
                     "Render passes until this many seconds are spent (finished passes only; the same image as a render of the spp it "

@@ -85,20 +85,21 @@ void Film::accumulate(double* xyz, double* spectral, const SampledSpectrum& L, c
     }
 }
 
-void Film::addSplat(int x, int y, double lambdaNm, double value) {
+void Film::addSplat(int x, int y, double lambdaNm, double value, bool fluorescent) {
     const size_t pixel = static_cast<size_t>(y) * static_cast<size_t>(width_) + static_cast<size_t>(x);
     if (!std::isfinite(value)) {
         ++nonFinite_[pixel];
         return;
     }
     if (lambdaNm < lambdaMin_ || lambdaNm > lambdaMax_) return;
-    double* xyz = &xyz_[kFluorescent][3 * pixel];
+    const int c = fluorescent ? kFluorescent : kElastic;
+    double* xyz = &xyz_[c][3 * pixel];
     xyz[0] += value * cmf_.x(lambdaNm) / yIntegral_;
     xyz[1] += value * cmf_.y(lambdaNm) / yIntegral_;
     xyz[2] += value * cmf_.z(lambdaNm) / yIntegral_;
     const int bins = binCount();
     const int b = std::min(bins - 1, static_cast<int>(std::floor((lambdaNm - lambdaMin_) / binWidth_)));
-    spectral_[kFluorescent][pixel * static_cast<size_t>(bins) + static_cast<size_t>(b)] += value / binWidths_[static_cast<size_t>(b)];
+    spectral_[c][pixel * static_cast<size_t>(bins) + static_cast<size_t>(b)] += value / binWidths_[static_cast<size_t>(b)];
 }
 
 void Film::commit(const Row& r) {

@@ -60,10 +60,10 @@ public:
     };
     void addSample(Row& row, int x, const PathRadiance& L, const SampledWavelengths& wl) const;
     void commit(const Row& row);
-    // A light-traced contribution to pixel (x, y)'s fluorescent layer (render/light_tracer.h): spectral
-    // radiance integrated over wavelength at `lambdaNm`, already divided by the photons traced per sample,
-    // so that image() averages it with the camera samples. Outside the spectral range it adds nothing.
-    void addSplat(int x, int y, double lambdaNm, double value);
+    // A light-traced contribution to pixel (x, y)'s fluorescent or elastic layer (render/light_tracer.h):
+    // spectral radiance integrated over wavelength at `lambdaNm`, already divided by the photons traced per
+    // sample, so that image() averages it with the camera samples. Outside the spectral range it adds nothing.
+    void addSplat(int x, int y, double lambdaNm, double value, bool fluorescent);
 
     // The accumulators, bit for bit, for render checkpoints (render/checkpoint.h). readState throws
     // IoError for a short stream and ConfigError for a state of another size.

@@ -23,7 +23,8 @@ constexpr double kConnectAt = 8;
 
 double spectralPower(const Spectrum& s, const Scene& scene) { return s.integral(scene.spectral.lambdaMin, scene.spectral.lambdaMax); }
 
-// Connects the vertices of re-emitted photons in a stack's liquid to the camera through the stack.
+// Connects the vertices of photons in a stack's liquid to the camera through the stack, and those of
+// re-emitted photons on opaque surfaces straight to it.
 class CameraConnections final : public PhotonEvents {
 public:
     CameraConnections(const Scene& scene, const PathTracer& tracer, double pixelArea, double photonsPerSample, Rng& rng,
@@ -31,7 +32,6 @@ public:
         : scene_(scene), tracer_(tracer), pixelArea_(pixelArea), perSample_(photonsPerSample), rng_(rng), out_(out), stats_(stats) {}
 
     void scattered(const Photon& ph, const Vec3& p) override {
-        if (!ph.fluorescent) return;
         const HenyeyGreenstein& phase = scene_.media[static_cast<size_t>(ph.medium)].phase();
         connect(ph, p, [&](const Vec3& w) { return phase.pdf(ph.ray.d, w); });
     }
@@ -54,7 +54,7 @@ public:
         if (!(f > 0)) return;
         const double T = tracer_.transmittance(hit.p, cam.position, ph.medium, wl, rng_, &hit.n, hit.epsilon)[0];
         if (!(T > 0)) return;
-        out_.push_back(FilmSplat{pixel->x, pixel->y, ph.lambda, ph.weight * f * T * pixel->importance / (d2 * perSample_)});
+        out_.push_back(FilmSplat{pixel->x, pixel->y, ph.lambda, ph.weight * f * T * pixel->importance / (d2 * perSample_), true});
     }
 
 private:
@@ -117,7 +117,7 @@ private:
             // The generalized geometry term is 1 / (dA⊥ at the camera per dω at p): the indices of refraction
             // cancel against the radiance's n² (docs/model.md).
             const double value = ph.weight * f * T * r.fresnel * pixel->importance / (dAdw * keep * perSample_);
-            out_.push_back(FilmSplat{pixel->x, pixel->y, ph.lambda, value});
+            out_.push_back(FilmSplat{pixel->x, pixel->y, ph.lambda, value, ph.fluorescent});
         }
     }
 

@@ -2,10 +2,10 @@
 // Fluorescence seen through glass spheres, traced from the lights (Integrator::Light). Photons leave the
 // lights, cross the glass by Fresnel sampling, scatter in media and on surfaces (BSDF sampling in
 // importance mode) and are absorbed and re-emitted by dyes (render/photon_tracer.h). From every vertex of
-// a re-emitted photon in the liquid inside a stack of concentric glass spheres (a scattering, or the
-// re-emission itself), every refracted chain through that stack to the camera (render/specular_chain.h)
-// carries its contribution to one pixel: a light-tracing connection through the glass, which a camera
-// path makes only by diffusing to where the dye is excited. The camera paths of the same render leave
+// a photon in the liquid inside a stack of concentric glass spheres (a scattering, or a re-emission), every
+// refracted chain through that stack to the camera (render/specular_chain.h) carries its contribution to
+// one pixel: a light-tracing connection through the glass, which a camera path makes only by diffusing
+// to where the light is. Re-emitted photons also connect straight from opaque, non-specular surfaces. The camera paths of the same render leave
 // exactly these paths out (PathStart::lightTracedFluorescence), so nothing is counted twice; the model,
 // the weights and the partition are in docs/model.md, "Fluorescence traced from the lights".
 #include <cstdint>
@@ -16,12 +16,13 @@
 
 namespace fluorosim {
 
-// One contribution of a photon to the film's fluorescent layer: spectral radiance integrated over
+// One contribution of a photon to the film: spectral radiance integrated over
 // wavelength (the film's unit times nm) at `lambda`, per photon traced per pixel and sample.
 struct FilmSplat {
     int32_t x, y;
     double lambda;
     double value;
+    bool fluorescent;  // re-emitted at least once: the film's fluorescent layer, else its elastic one
 };
 
 struct LightTraceStats {

@@ -297,7 +297,8 @@ struct PathTracer::PathState {
     // PathStart::lightTracedFluorescence: the path is still on its way from the camera into the liquid of
     // shells_[enterShells] (it has refracted inward through enterNext of its interfaces, outermost first);
     // once inside (lightTracedSegment) its first free flight there has no branch points, and a scattering
-    // on it hands all the path's fluorescence to the light tracer (fluorescenceCovered).
+    // on it ends the path: the light tracer carries all its light from there. A first vertex on an opaque,
+    // non-specular surface hands only the path's fluorescence to the light tracer (fluorescenceCovered).
     bool cameraPrefix = false, lightTracedSegment = false, fluorescenceCovered = false;
     int enterShells = -1, enterNext = 0;
 };
@@ -925,8 +926,13 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                             st.level = st.imaging->imageLevel(y);
                         }
                         st.firstSegment = false;
-                        st.fluorescenceCovered = st.fluorescenceCovered || st.lightTracedSegment;
-                        st.cameraPrefix = st.lightTracedSegment = false;
+                        // A scattering on the camera's first free flight in a stack's liquid: the light tracer's
+                        // connections from its photons' vertices there carry everything this path would find.
+                        if (st.lightTracedSegment) {
+                            terminated = true;
+                            return false;
+                        }
+                        st.cameraPrefix = false;
                         if (beta && r_u) {
                             scatterInMedium(y, med.phase(), med.phase().g(), {});
                             scattered = true;

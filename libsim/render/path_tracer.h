@@ -219,11 +219,12 @@ private:
     int shellsAround(const Vec3& p, int medium) const;
 };
 
-// Whether a camera path with Integrator::Light leaves its fluorescence to the light tracer: it does when its
-// first medium vertex (a scattering, or a fluorescence branch point) lies in the liquid inside a stack of
-// shells that it reached straight from the camera by refraction through every interface of that stack, or
-// when its first vertex is an opaque, non-specular surface seen straight from the camera (index-matched
-// interfaces on the way do not matter). The light tracer connects exactly those vertices.
+// What a camera path with Integrator::Light leaves to the light tracer: all its light (elastic and
+// fluorescent) when its first medium vertex (a scattering, or a fluorescence branch point) lies in the
+// liquid inside a stack of shells that it reached straight from the camera by refraction through every
+// interface of that stack; its fluorescence when its first vertex is an opaque, non-specular surface seen
+// straight from the camera (index-matched interfaces on the way do not matter). The light tracer connects
+// exactly those vertices.
 // Documented in docs/model.md, "Fluorescence traced from the lights".
 
 }  // namespace fluorosim

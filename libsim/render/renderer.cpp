@@ -137,7 +137,7 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
         }
         for (int y = 0; y < rows; ++y) film.commit(staged[static_cast<size_t>(y)]);
         for (size_t b = 0; b < splats.size(); ++b) {
-            for (const FilmSplat& s : splats[b]) film.addSplat(s.x, s.y, s.lambda, s.value);
+            for (const FilmSplat& s : splats[b]) film.addSplat(s.x, s.y, s.lambda, s.value, s.fluorescent);
             summary.light.add(batchStats[b]);
         }
         rowStats = std::move(stagedStats);

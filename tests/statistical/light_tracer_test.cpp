@@ -1,6 +1,6 @@
 // Fluorescence traced from the lights (Integrator::Light): a scattering liquid dyed with AF488 in a glass
-// sphere, lit from above by a lamp of one line at 495 nm, rendered onto a small image. Its fluorescent
-// layer, summed over the four quadrants of the image, against the same render with manifold next-event
+// sphere, lit from above by a lamp of one line at 495 nm, rendered onto a small image. Its fluorescent and
+// elastic layers, each summed over the four quadrants of the image, against the same render with manifold next-event
 // estimation (Integrator::Mnee, whose camera paths find all of it themselves), from independent seeds:
 // z-scores from the spread of the seeds, fixed seeds. Controls: glass and liquid of index 1 (the chains
 // are straight lines), a point light (nothing but chains reaches it), a diffuse floor under the sphere
@@ -27,7 +27,7 @@ using testing::flatCmf;
 
 struct SphereScene {
     double liquidIor = 1.33, glassIor = 1.5;
-    bool pointLight = false;
+    double lampRadius = 0.3;  // 0: a point light of the lamp's intensity (radiance 10 × its cross-section π 0.3², in m²)
     bool floor = false;
     Integrator integrator = Integrator::Light;
 };
@@ -41,14 +41,14 @@ Scene sphereScene(const SphereScene& o) {
     addInterfaceSphere(scene, Vec3(0, 0, 0), 1.0, liquid, glass, 0);
     addInterfaceSphere(scene, Vec3(0, 0, 0), 1.2, glass, kNone, 0);
     const Vec3 lampAt(0.2, 2.0, 0.1);
-    if (o.pointLight) {
+    if (o.lampRadius == 0) {
         scene.lights.push_back(PointLight{lampAt, Spectrum::lines({{495.0, 10.0 * kPi * sqr(0.3e-3)}})});
     } else {
-        const uint32_t lamp = scene.geometry.addSphere(lampAt, 0.3);
+        const uint32_t lamp = scene.geometry.addSphere(lampAt, o.lampRadius);
         ShapeInfo info;
         info.name = "lamp";
         scene.shapes.push_back(info);
-        scene.addAreaLight(lamp, AreaEmission{Spectrum::lines({{495.0, 10.0}}), false});
+        scene.addAreaLight(lamp, AreaEmission{Spectrum::lines({{495.0, 10.0 * sqr(0.3 / o.lampRadius)}}), false});
     }
     if (o.floor) {
         scene.materials.push_back(makeDiffuse(Spectrum::constant(0.8)));
@@ -71,8 +71,10 @@ Scene sphereScene(const SphereScene& o) {
     return scene;
 }
 
-// The fluorescent layer's total over each quadrant of the image (spectral radiance summed over pixels and bins).
-std::array<double, 4> quadrants(const Scene& scene, int spp, uint64_t seed) {
+constexpr size_t kRegions = 8;  // the four quadrants of the fluorescent layer, then of the elastic layer
+
+// Each layer's total over each quadrant of the image (spectral radiance summed over pixels and bins).
+std::array<double, kRegions> quadrants(const Scene& scene, int spp, uint64_t seed) {
     Film film(scene.camera.width, scene.camera.height, scene.spectral.lambdaMin, scene.spectral.lambdaMax, scene.spectral.binWidth, flatCmf(), true);
     RenderOptions o;
     o.spp = spp;
@@ -80,48 +82,48 @@ std::array<double, 4> quadrants(const Scene& scene, int spp, uint64_t seed) {
     o.sppPerPass = 0;
     render(scene, film, o);
     const ExrImage img = film.image(spp);
-    const SpectralLayer* layer = nullptr;
-    for (const SpectralLayer& l : img.spectral)
-        if (l.prefix == "fluorescent") layer = &l;
-    EXPECT_NE(layer, nullptr);
-    std::array<double, 4> q{};
+    std::array<double, kRegions> q{};
     const size_t pixels = static_cast<size_t>(img.width) * static_cast<size_t>(img.height);
-    for (size_t b = 0; b < layer->wavelengthsNm.size(); ++b)
-        for (size_t p = 0; p < pixels; ++p) {
-            const int x = static_cast<int>(p % static_cast<size_t>(img.width)), y = static_cast<int>(p / static_cast<size_t>(img.width));
-            q[static_cast<size_t>((y >= img.height / 2) * 2 + (x >= img.width / 2))] += layer->values[b * pixels + p];
-        }
+    for (const SpectralLayer& layer : img.spectral) {
+        if (layer.prefix != "fluorescent" && layer.prefix != "elastic") continue;
+        const size_t offset = layer.prefix == "fluorescent" ? 0 : 4;
+        for (size_t b = 0; b < layer.wavelengthsNm.size(); ++b)
+            for (size_t p = 0; p < pixels; ++p) {
+                const int x = static_cast<int>(p % static_cast<size_t>(img.width)), y = static_cast<int>(p / static_cast<size_t>(img.width));
+                q[offset + static_cast<size_t>((y >= img.height / 2) * 2 + (x >= img.width / 2))] += layer.values[b * pixels + p];
+            }
+    }
     return q;
 }
 
 struct QuadrantEstimate {
-    std::array<double, 4> mean{}, stderr_{};
+    std::array<double, kRegions> mean{}, stderr_{};
 };
 
 // Mean and standard error over `seeds` independent renders.
 QuadrantEstimate estimate(const Scene& scene, int spp, int seeds, uint64_t firstSeed) {
-    std::array<double, 4> s{}, s2{};
+    std::array<double, kRegions> s{}, s2{};
     for (int k = 0; k < seeds; ++k) {
         const auto q = quadrants(scene, spp, firstSeed + static_cast<uint64_t>(k));
-        for (size_t i = 0; i < 4; ++i) {
+        for (size_t i = 0; i < kRegions; ++i) {
             s[i] += q[i];
             s2[i] += q[i] * q[i];
         }
     }
     QuadrantEstimate e;
-    for (size_t i = 0; i < 4; ++i) {
+    for (size_t i = 0; i < kRegions; ++i) {
         e.mean[i] = s[i] / seeds;
         e.stderr_[i] = std::sqrt(std::max(0.0, s2[i] / seeds - sqr(e.mean[i])) / (seeds - 1));
     }
     return e;
 }
 
-void expectAgreement(const QuadrantEstimate& light, const QuadrantEstimate& reference) {
-    for (size_t i = 0; i < 4; ++i) {
-        char buf[128];
-        std::snprintf(buf, sizeof buf, "quadrant %zu: light %.4g +- %.2g, mnee %.4g +- %.2g", i, light.mean[i], light.stderr_[i], reference.mean[i],
-                      reference.stderr_[i]);
-        ::testing::Test::RecordProperty("quadrant" + std::to_string(i), buf);
+void expectAgreement(const QuadrantEstimate& light, const QuadrantEstimate& reference, const char* referenceName = "mnee") {
+    for (size_t i = 0; i < kRegions; ++i) {
+        char buf[160];
+        std::snprintf(buf, sizeof buf, "%s quadrant %zu: light %.4g +- %.2g, %s %.4g +- %.2g", i < 4 ? "fluorescent" : "elastic", i % 4,
+                      light.mean[i], light.stderr_[i], referenceName, reference.mean[i], reference.stderr_[i]);
+        ::testing::Test::RecordProperty("region" + std::to_string(i), buf);
         ASSERT_GT(reference.mean[i], 0) << buf;
         const double z = (light.mean[i] - reference.mean[i]) / std::sqrt(sqr(light.stderr_[i]) + sqr(reference.stderr_[i]));
         EXPECT_LT(std::abs(z), 4.0) << buf;
@@ -148,11 +150,17 @@ TEST(LightTracer, IndexOneGlassAgreesWithManifoldNextEventEstimation) {
     expectAgreement(both(o, 16, 64, &mnee), mnee);
 }
 
-TEST(LightTracer, PointLightBehindGlassAgreesWithManifoldNextEventEstimation) {
+// A point light behind glass, against a lamp of radius 0.02 of the same intensity, both traced from the
+// lights (different emission code; the lamp's size changes the answer by about (0.02 / 2)²). Manifold
+// next-event estimation is no reference here: it reaches a point light only by chains of refractions, and
+// the light that reflects inside the glass on its way in is missing from it (three of the elastic layer's
+// quadrants came out 3–9 % below the light tracer's, z up to 3.4).
+TEST(LightTracer, PointLightBehindGlassEqualsASmallSphericalLamp) {
     SphereScene o;
-    o.pointLight = true;
-    QuadrantEstimate mnee;
-    expectAgreement(both(o, 16, 64, &mnee), mnee);
+    o.lampRadius = 0;
+    const QuadrantEstimate point = estimate(sphereScene(o), 16, 8, 300);
+    o.lampRadius = 0.02;
+    expectAgreement(point, estimate(sphereScene(o), 16, 8, 400), "small lamp");
 }
 
 TEST(LightTracer, PhotonsThatBounceOffAFloorAgreeWithManifoldNextEventEstimation) {
