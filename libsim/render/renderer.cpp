@@ -61,7 +61,8 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
     summary.sppCompleted = options.firstSample;
     std::vector<PathStats> rowStats(static_cast<size_t>(rows));
     std::mutex progressMutex;
-    const double totalWork = static_cast<double>(options.spp - options.firstSample) * rows;
+    // Progress counts rows of passes; with photons, a pass's photon batches count as much as its rows.
+    const double totalWork = static_cast<double>(options.spp - options.firstSample) * rows * (lightTracer ? 2 : 1);
     double workDone = 0;
     const int perPass = samplesPerPass(options, cam.width, rows);
     requireMemory(static_cast<double>(cam.width) * rows * perPass * sizeof(Film::Row::Sample),
@@ -129,6 +130,11 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
                     lightTracer->trace(options.seed, i, perSample, splats[b], batchStats[b]);
                 }
                 batchDone[b] = 1;
+                if (options.progress) {
+                    std::lock_guard<std::mutex> lock(progressMutex);
+                    workDone += static_cast<double>(passEnd - passStart) * rows / static_cast<double>(batches);
+                    options.progress(std::min(1.0, workDone / totalWork));
+                }
             });
             if (std::find(batchDone.begin(), batchDone.end(), 0) != batchDone.end()) {
                 summary.cancelled = true;
