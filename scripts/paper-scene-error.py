@@ -10,7 +10,7 @@ The liquid's pixels: those whose central camera ray meets a liquid-filled sphere
 type sphere whose "interior" is a dyed medium, grown to the glass shell around them). Spheres only.
 With --whole: the whole image's total (elastic + fluorescent) RGB instead, for scenes without dyes.
 
-Usage: PYTHONPATH=build/python scripts/paper-scene-error.py [--whole] SCENE.json path:40 mnee:4 ...
+Usage: PYTHONPATH=build/python scripts/paper-scene-error.py [--whole] SCENE.json path:40 mnee:4 light:32 ...
 """
 import json
 import math
