@@ -129,6 +129,10 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
                     if ((i & 63) == 0 && cancelled()) return;
                     lightTracer->trace(options.seed, i, perSample, splats[b], batchStats[b]);
                 }
+                // A pass holds every batch's splats until it commits them: bounded by the memory cap, judged
+                // from this batch.
+                requireMemory(static_cast<double>(splats[b].capacity()) * sizeof(FilmSplat) * static_cast<double>(batches),
+                              "the light tracer's splats of a pass of " + std::to_string(end - first) + " photons");
                 batchDone[b] = 1;
                 if (options.progress) {
                     std::lock_guard<std::mutex> lock(progressMutex);

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "core/errors.h"
+#include "core/memory_cap.h"
 #include "render/renderer.h"
 #include "support/fluorescent_scenes.h"
 #include "support/test_scenes.h"
@@ -180,6 +181,24 @@ TEST(LightTracer, RefusesWhatItCannotTrace) {
     scene.render.fluorescence = FluorescenceModel::Paper;
     Film film(16, 16, 400, 700, 20, flatCmf(), true);
     EXPECT_THROW(render(scene, film, opt), ConfigError);
+}
+
+// A pass's splats are held until it ends: over the memory cap, the render stops with a ConfigError
+// naming them (a cap of 1 MiB holds the film, about 0.2 MB, but not the splats of 4096 photons per pixel).
+TEST(LightTracer, SplatsOverTheMemoryCapAreRefused) {
+    Scene scene = sphereScene({});
+    scene.render.photonsPerPixel = 4096;
+    Film film(16, 16, 400, 700, 20, flatCmf(), true);
+    RenderOptions opt;
+    opt.spp = 1;
+    setMemoryCapBytes(1 << 20);
+    try {
+        render(scene, film, opt);
+        ADD_FAILURE() << "no error";
+    } catch (const ConfigError& e) {
+        EXPECT_NE(std::string(e.what()).find("splats"), std::string::npos) << e.what();
+    }
+    setMemoryCapBytes(0);
 }
 
 // The image does not depend on the thread count: photon batches commit their splats in order.
