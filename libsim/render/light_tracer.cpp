@@ -76,11 +76,9 @@ private:
 
     template <class Phase>
     void connect(const Photon& ph, const Vec3& p, Phase&& phaseValue) {
-        const auto& stacks = tracer_.shells();
-        const SphericalShells* sh = nullptr;
-        for (const SphericalShells& s : stacks)
-            if (s.medium[0] == ph.medium && length(p - s.center) < s.radius[0]) sh = &s;
-        if (!sh) return;
+        const int stack = tracer_.shellsAround(p, ph.medium);
+        if (stack < 0) return;
+        const SphericalShells* sh = &tracer_.shells()[static_cast<size_t>(stack)];
         const SampledWavelengths wl = SampledWavelengths::atLine(ph.lambda, 1.0);
         double keep = 1;
         const Medium& m = scene_.media[static_cast<size_t>(ph.medium)];
@@ -131,7 +129,7 @@ private:
 
 }  // namespace
 
-LightTracer::LightTracer(const Scene& scene, const PathTracer& tracer) : scene_(scene), tracer_(tracer) {
+LightTracer::LightTracer(const Scene& scene, const PathTracer& tracer) : scene_(scene), tracer_(tracer), lights_(scene) {
     if (scene.render.fluorescence == FluorescenceModel::Paper)
         throw ConfigError("the light integrator traces the full fluorescence model; the paper's model needs \"path\" or \"mnee\"");
     const Camera& cam = scene.camera;
@@ -165,7 +163,7 @@ LightTracer::LightTracer(const Scene& scene, const PathTracer& tracer) : scene_(
     }
 }
 
-void LightTracer::trace(uint64_t seed, uint64_t index, double photonsPerSample, std::vector<FilmSplat>& out, LightTraceStats& stats) const {
+void LightTracer::trace(uint64_t seed, uint64_t index, std::vector<FilmSplat>& out, LightTraceStats& stats) const {
     ++stats.photons;
     Rng rng = Rng::forKey(seed, index, 0x6c696768);
     const double u = rng.uniform();
@@ -177,22 +175,9 @@ void LightTracer::trace(uint64_t seed, uint64_t index, double photonsPerSample, 
     const double lo = scene_.spectral.lambdaMin, hi = scene_.spectral.lambdaMax;
     if (const auto* a = std::get_if<AreaLight>(e.light)) {
         // A point by area on the emitting shape, a cosine-distributed direction on its emitting side.
-        Vec3 p, n;
         const uint32_t shape = a->shape;
         const double u1 = rng.uniform(), u2 = rng.uniform();
-        if (scene_.geometry.isSphere(shape)) {
-            n = sampleUniformSphere(u1, u2);
-            p = scene_.geometry.sphereCenter(shape) + n * scene_.geometry.sphereRadius(shape);
-        } else {
-            const TriangleMesh& m = scene_.geometry.mesh(shape);
-            const auto t = std::lower_bound(a->triangleCdf.begin(), a->triangleCdf.end(), u1);
-            const size_t tri = std::min(static_cast<size_t>(t - a->triangleCdf.begin()), a->triangleCdf.size() - 1);
-            const double prev = tri == 0 ? 0.0 : a->triangleCdf[tri - 1];
-            const auto b = sampleUniformTriangle(std::clamp((u1 - prev) / std::max(a->triangleCdf[tri] - prev, 1e-300), 0.0, 1.0), u2);
-            const Vec3 &v0 = m.positions[m.indices[3 * tri]], &v1 = m.positions[m.indices[3 * tri + 1]], &v2 = m.positions[m.indices[3 * tri + 2]];
-            p = v0 * b[0] + v1 * b[1] + v2 * (1 - b[0] - b[1]);
-            n = normalize(cross(v1 - v0, v2 - v0));
-        }
+        auto [p, n] = lights_.pointByArea(*a, u1, u2);
         double sides = 1;
         if (a->emission.twoSided) {
             sides = 2;
@@ -217,7 +202,7 @@ void LightTracer::trace(uint64_t seed, uint64_t index, double photonsPerSample, 
         ph.ray = Ray{sl->position, dir};
     }
     if (!(ph.weight > 0)) return;
-    CameraConnections connections(scene_, tracer_, pixelArea_, photonsPerSample, rng, out, stats);
+    CameraConnections connections(scene_, tracer_, pixelArea_, photonsPerSample(), rng, out, stats);
     walkPhoton(scene_, ph, rng, connections, true);
 }
 

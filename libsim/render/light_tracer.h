@@ -5,13 +5,15 @@
 // a photon in the liquid inside a stack of concentric glass spheres (a scattering, or a re-emission), every
 // refracted chain through that stack to the camera (render/specular_chain.h) carries its contribution to
 // one pixel: a light-tracing connection through the glass, which a camera path makes only by diffusing
-// to where the light is. Re-emitted photons also connect straight from opaque, non-specular surfaces. The camera paths of the same render leave
-// exactly these paths out (PathStart::lightTracedFluorescence), so nothing is counted twice; the model,
-// the weights and the partition are in docs/model.md, "Fluorescence traced from the lights".
+// to where the light is. Re-emitted photons also connect straight from opaque, non-specular surfaces.
+// The camera paths of the same render leave exactly these paths out (PathStart::lightTracedFluorescence),
+// so nothing is counted twice; the model, the weights and the partition are in docs/model.md,
+// "Fluorescence traced from the lights".
 #include <cstdint>
 #include <vector>
 
 #include "render/path_tracer.h"
+#include "scene/light_sampler.h"
 #include "scene/scene.h"
 
 namespace fluorosim {
@@ -41,11 +43,11 @@ public:
     // inside a medium or inside a stack of shells.
     LightTracer(const Scene& scene, const PathTracer& tracer);
     // Photon `index` of a render with `seed` (its own random stream): appends its splats, scaled so that
-    // tracing `photonsPerSample` photons per sample per pixel adds their share to the film's mean.
-    void trace(uint64_t seed, uint64_t index, double photonsPerSample, std::vector<FilmSplat>& out, LightTraceStats& stats) const;
+    // tracing photonsPerSample() photons per sample adds their share to the film's mean.
+    void trace(uint64_t seed, uint64_t index, std::vector<FilmSplat>& out, LightTraceStats& stats) const;
     // Photons a render traces per sample (per pixel): RenderSettings::photonsPerPixel per pixel of the whole image.
-    static double photonsPerSample(const Scene& scene) {
-        return static_cast<double>(scene.camera.width) * scene.camera.height * scene.render.photonsPerPixel;
+    double photonsPerSample() const {
+        return static_cast<double>(scene_.camera.width) * scene_.camera.height * scene_.render.photonsPerPixel;
     }
 
 private:
@@ -55,6 +57,7 @@ private:
     };
     const Scene& scene_;
     const PathTracer& tracer_;
+    LightSampler lights_;
     std::vector<Emitter> emitters_;
     double pixelArea_;  // of one pixel on the image plane at unit distance
 };

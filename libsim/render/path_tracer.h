@@ -129,8 +129,13 @@ struct PathStart {
     const EmissionLabels* labels = nullptr;      // split the camera path's re-emissions by label (PathRadiance::labelled)
     const ExcitationField* field = nullptr;      // excitation at lines looked up, not traced, where it reaches
     double tMin = 0;                             // > 0 when ray.o lies on a surface the ray leaves
-    // A camera path of a render whose fluorescence seen through glass spheres is traced from the lights
-    // (Integrator::Light, render/light_tracer.h): it leaves out what the photons' connections carry.
+    // A camera path of a render whose light seen through glass spheres is traced from the lights
+    // (Integrator::Light, render/light_tracer.h): it leaves out what the photons' connections carry, all
+    // its light when its first medium vertex (a scattering, or a fluorescence branch point) lies in the
+    // liquid of a stack of shells reached straight from the camera by refraction through every interface of
+    // that stack, its fluorescence when its first vertex is an opaque, non-specular surface seen straight
+    // from the camera (index-matched interfaces on the way do not matter). docs/model.md, "Fluorescence
+    // traced from the lights".
     bool lightTracedFluorescence = false;
 };
 
@@ -168,8 +173,10 @@ public:
 
     const FluorescencePlan& fluorescence() const { return fluorescence_; }
     const std::vector<Light>& lights() const { return lightList_; }
-    // The stacks of concentric smooth spheres that chains cross (Integrator::Mnee and Light; else none).
+    // The stacks of concentric smooth spheres that chains cross (Integrator::Mnee and Light; else none),
+    // and the index of the stack whose innermost sphere holds p in `medium` (-1 if none).
     const std::vector<SphericalShells>& shells() const { return shells_; }
+    int shellsAround(const Vec3& p, int medium) const;
 
 private:
     struct PathState;
@@ -213,19 +220,9 @@ private:
     FluorescencePlan fluorescence_;
     bool hasBeams_ = false;  // some light is a beam: the sheet-side strategy runs at its lines
     std::vector<double> lineWavelengths_;  // the beams' spectral lines, each once
-    // Integrator::Mnee: the stacks of concentric smooth spherical interfaces, and for a vertex the stack
-    // whose innermost sphere holds it (null if none).
+    // Integrator::Mnee and Light: the stacks of concentric smooth spherical interfaces.
     std::vector<SphericalShells> shells_;
-    int shellsAround(const Vec3& p, int medium) const;
 };
-
-// What a camera path with Integrator::Light leaves to the light tracer: all its light (elastic and
-// fluorescent) when its first medium vertex (a scattering, or a fluorescence branch point) lies in the
-// liquid inside a stack of shells that it reached straight from the camera by refraction through every
-// interface of that stack; its fluorescence when its first vertex is an opaque, non-specular surface seen
-// straight from the camera (index-matched interfaces on the way do not matter). The light tracer connects
-// exactly those vertices.
-// Documented in docs/model.md, "Fluorescence traced from the lights".
 
 }  // namespace fluorosim
 

@@ -42,7 +42,7 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
     options.validate();
     const auto start = std::chrono::steady_clock::now();
     const PathTracer tracer(scene);
-    // Integrator::Light: each pass also traces photons (LightTracer::photonsPerSample per sample per pixel),
+    // Integrator::Light: each pass also traces photons (LightTracer::photonsPerSample per sample),
     // whose splats land anywhere in the image, so the film must hold all of it.
     std::optional<LightTracer> lightTracer;
     if (scene.render.integrator == Integrator::Light) {
@@ -117,7 +117,7 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
         std::vector<LightTraceStats> batchStats;
         if (lightTracer) {
             constexpr uint64_t kBatch = 4096;
-            const double perSample = LightTracer::photonsPerSample(scene);
+            const double perSample = lightTracer->photonsPerSample();
             const auto first = static_cast<uint64_t>(passStart * perSample), end = static_cast<uint64_t>(passEnd * perSample);
             const size_t batches = static_cast<size_t>((end - first + kBatch - 1) / kBatch);
             splats.resize(batches);
@@ -127,7 +127,7 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
                 const uint64_t from = first + b * kBatch, to = std::min(end, from + kBatch);
                 for (uint64_t i = from; i < to; ++i) {
                     if ((i & 63) == 0 && cancelled()) return;
-                    lightTracer->trace(options.seed, i, perSample, splats[b], batchStats[b]);
+                    lightTracer->trace(options.seed, i, splats[b], batchStats[b]);
                 }
                 // A pass holds every batch's splats until it commits them: bounded by the memory cap, judged
                 // from this batch.

@@ -1,6 +1,7 @@
 #include "scene/light_sampler.h"
 
 #include <algorithm>
+#include <tuple>
 
 #include "core/math.h"
 #include "core/sampling.h"
@@ -35,6 +36,21 @@ double smoothStep(double x, double a, double b) {
 SampledSpectrum LightSampler::emitted(const AreaLight& light, const Vec3& n, const Vec3& w, const SampledWavelengths& wl) const {
     if (!light.emission.twoSided && dot(n, w) <= 0) return SampledSpectrum(0.0);
     return light.emission.radiance.sampleEmission(wl);
+}
+
+std::pair<Vec3, Vec3> LightSampler::pointByArea(const AreaLight& al, double u1, double u2) const {
+    if (scene_.geometry.isSphere(al.shape)) {
+        const Vec3 n = sampleUniformSphere(u1, u2);
+        return {scene_.geometry.sphereCenter(al.shape) + n * scene_.geometry.sphereRadius(al.shape), n};
+    }
+    const TriangleMesh& m = scene_.geometry.mesh(al.shape);
+    const auto it = std::lower_bound(al.triangleCdf.begin(), al.triangleCdf.end(), u1);
+    const size_t tri = std::min(static_cast<size_t>(it - al.triangleCdf.begin()), al.triangleCdf.size() - 1);
+    const double lo = tri == 0 ? 0.0 : al.triangleCdf[tri - 1];
+    const double uRemap = std::clamp((u1 - lo) / std::max(al.triangleCdf[tri] - lo, 1e-300), 0.0, 1.0);
+    const auto b = sampleUniformTriangle(uRemap, u2);
+    const Vec3 &a = m.positions[m.indices[3 * tri]], &bb = m.positions[m.indices[3 * tri + 1]], &cc = m.positions[m.indices[3 * tri + 2]];
+    return {a * b[0] + bb * b[1] + cc * (1 - b[0] - b[1]), normalize(cross(bb - a, cc - a))};
 }
 
 double LightSampler::spotFalloff(const SpotLight& light, const Vec3& w) {
@@ -97,8 +113,7 @@ std::optional<LightSample> LightSampler::sample(const Vec3& ref, double uLight, 
         const double r = scene_.geometry.sphereRadius(al.shape);
         const SphereCone cone(ref, c, r);
         if (cone.inside) {
-            ls.n = sampleUniformSphere(u1, u2);
-            ls.p = c + ls.n * r;
+            std::tie(ls.p, ls.n) = pointByArea(al, u1, u2);
         } else {
             // Uniform direction in the cone, then the visible point of the sphere along it.
             double cosTheta = 1.0 - u1 * cone.oneMinusCosThetaMax;
@@ -123,16 +138,7 @@ std::optional<LightSample> LightSampler::sample(const Vec3& ref, double uLight, 
             return ls;
         }
     } else {
-        const TriangleMesh& m = scene_.geometry.mesh(al.shape);
-        const auto it = std::lower_bound(al.triangleCdf.begin(), al.triangleCdf.end(), u1);
-        const size_t tri = std::min(static_cast<size_t>(it - al.triangleCdf.begin()), al.triangleCdf.size() - 1);
-        const double lo = tri == 0 ? 0.0 : al.triangleCdf[tri - 1];
-        const double uRemap = std::clamp((u1 - lo) / std::max(al.triangleCdf[tri] - lo, 1e-300), 0.0, 1.0);
-        const auto b = sampleUniformTriangle(uRemap, u2);
-        const Vec3 &a = m.positions[m.indices[3 * tri]], &bb = m.positions[m.indices[3 * tri + 1]],
-                   &cc = m.positions[m.indices[3 * tri + 2]];
-        ls.p = a * b[0] + bb * b[1] + cc * (1 - b[0] - b[1]);
-        ls.n = normalize(cross(bb - a, cc - a));
+        std::tie(ls.p, ls.n) = pointByArea(al, u1, u2);
     }
     const Vec3 d = ls.p - ref;
     ls.distance = length(d);

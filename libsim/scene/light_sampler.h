@@ -37,6 +37,8 @@ public:
     std::optional<LightSample> sample(const Vec3& ref, double uLight, double u1, double u2, const SampledWavelengths& wl) const;
     // Solid-angle pdf of sampling point `pLight` (normal nLight) on the area light of `shape` from `ref`.
     double pdf(const Vec3& ref, uint32_t shape, const Vec3& pLight, const Vec3& nLight) const;
+    // A point of an area light's shape drawn uniformly by area, and its normal (a mesh's by winding).
+    std::pair<Vec3, Vec3> pointByArea(const AreaLight& light, double u1, double u2) const;
     // Radiance leaving an area light at a point with normal n towards direction w.
     SampledSpectrum emitted(const AreaLight& light, const Vec3& n, const Vec3& w, const SampledWavelengths& wl) const;
     // A point or spot light's intensity toward direction w (leaving it), times kMm2PerM2, over
