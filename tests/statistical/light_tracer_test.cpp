@@ -178,9 +178,30 @@ TEST(LightTracer, RefusesWhatItCannotTrace) {
     RenderOptions opt;
     opt.spp = 1;
     EXPECT_THROW(render(scene, band, opt), ConfigError);
-    scene.render.fluorescence = FluorescenceModel::Paper;
     Film film(16, 16, 400, 700, 20, flatCmf(), true);
+    scene.render.fluorescence = FluorescenceModel::Paper;
     EXPECT_THROW(render(scene, film, opt), ConfigError);
+    scene.render.fluorescence = FluorescenceModel::Full;
+    auto refused = [&](Film& f, const char* because) {
+        try {
+            render(scene, f, opt);
+            ADD_FAILURE() << "no error: " << because;
+        } catch (const ConfigError& e) {
+            EXPECT_NE(std::string(e.what()).find(because), std::string::npos) << e.what();
+        }
+    };
+    // A camera inside the glass sphere, or inside a medium.
+    const Vec3 outside = scene.camera.position;
+    scene.camera.position = Vec3(0, 0, 0);
+    refused(film, "outside every glass sphere");
+    scene.camera.position = outside;
+    scene.camera.medium = 0;
+    refused(film, "outside every medium");
+    scene.camera.medium = kNone;
+    // No light that emits inside the spectral range (the lamp's line at 495 nm lies outside 600-700 nm).
+    scene.spectral = {600, 700, 20};
+    Film red(16, 16, 600, 700, 20, flatCmf(), true);
+    refused(red, "emits inside the spectral range");
 }
 
 // A pass's splats are held until it ends: over the memory cap, the render stops with a ConfigError
