@@ -10,7 +10,8 @@ The liquid's pixels: those whose central camera ray meets a liquid-filled sphere
 type sphere whose "interior" is a dyed medium, grown to the glass shell around them). Spheres only.
 With --whole: the whole image's total (elastic + fluorescent) RGB instead, for scenes without dyes.
 
-Usage: PYTHONPATH=build/python scripts/paper-scene-error.py [--whole] SCENE.json path:40 mnee:4 light:32 ...
+Usage: PYTHONPATH=build/python scripts/paper-scene-error.py [--whole] SCENE.json path:40 mnee:4 light:32 light:32:0 ...
+(light:SPP:R sets render.merge_radius_pixels to R; 0 turns photon merging off)
 """
 import json
 import math
@@ -65,14 +66,18 @@ def main():
     layer = (lambda r: r["rgb"].sum(axis=2)) if whole else fluorescent
     base = path.rsplit("/", 1)[0] if "/" in path else "."
     for spec in args[1:]:
-        integrator, spp = spec.split(":")
+        integrator, spp, *radius = spec.split(":")
         scene["render"]["integrator"] = integrator
+        scene["render"].pop("merge_radius_pixels", None)
+        if radius:
+            scene["render"]["merge_radius_pixels"] = float(radius[0])
         runs = [fluorosim.render(scene, spp=int(spp), seed=seed, base=base) for seed in (1, 2)]
         a, b = layer(runs[0])[mask], layer(runs[1])[mask]
         mean = 0.5 * (a.mean() + b.mean())
         rms = math.sqrt(np.mean((a - b) ** 2) / 2) / mean if mean > 0 else float("nan")
         seconds = 0.5 * (runs[0]["seconds"] + runs[1]["seconds"])
-        print(json.dumps({"scene": path, "integrator": integrator, "spp": int(spp), "pixels": int(mask.sum()),
+        print(json.dumps({"scene": path, "integrator": integrator, "spp": int(spp), **({"merge_radius_pixels": float(radius[0])} if radius else {}),
+                          "pixels": int(mask.sum()),
                           "layer": "total" if whole else "fluorescent", "mean": float(mean), "relative_rms_error": rms, "seconds_per_render": seconds,
                           "relative_mse_x_seconds": rms * rms * seconds}), flush=True)
 

@@ -245,6 +245,9 @@ void runRender(const RenderArgs& a) {
                                     // Integrator "light": the photons this run traced, and their chains to the camera.
                                     {"photons", s.light.photons},
                                     {"photon_connections", s.light.connections},
+                                    // and the camera segments behind glass their vertices were merged with.
+                                    {"merged_segments", s.light.mergedSegments},
+                                    {"photon_merges", s.light.merges},
                                     {"cancelled", s.cancelled},
                                     {"time_budget_seconds", a.time ? nlohmann::json(*a.time) : nlohmann::json(nullptr)},
                                     {"time_budget_spent", s.timeBudgetSpent}};

@@ -8,6 +8,7 @@
 #include "core/math.h"
 #include "core/rng.h"
 #include "core/sampling.h"
+#include "render/photon_merging.h"
 #include "render/photon_tracer.h"
 #include "render/specular_chain.h"
 #include "scene/light_sampler.h"
@@ -28,15 +29,20 @@ double spectralPower(const Spectrum& s, const Scene& scene) { return s.integral(
 class CameraConnections final : public PhotonEvents {
 public:
     CameraConnections(const Scene& scene, const PathTracer& tracer, double pixelArea, double photonsPerSample, Rng& rng,
-                      std::vector<FilmSplat>& out, LightTraceStats& stats)
-        : scene_(scene), tracer_(tracer), pixelArea_(pixelArea), perSample_(photonsPerSample), rng_(rng), out_(out), stats_(stats) {}
+                      std::vector<FilmSplat>& out, LightTraceStats& stats, const CameraSegments* merging)
+        : scene_(scene), tracer_(tracer), pixelArea_(pixelArea), perSample_(photonsPerSample), rng_(rng), out_(out), stats_(stats),
+          merging_(merging) {}
 
     void scattered(const Photon& ph, const Vec3& p) override {
         const HenyeyGreenstein& phase = scene_.media[static_cast<size_t>(ph.medium)].phase();
-        connect(ph, p, [&](const Vec3& w) { return phase.pdf(ph.ray.d, w); });
+        const auto f = [&](const Vec3& w) { return phase.pdf(ph.ray.d, w); };
+        connect(ph, p, f);
+        if (merging_) merging_->gather(ph, p, f, perSample_, out_, stats_.merges);
     }
     void reemitted(const Photon& ph, const Vec3& p) override {
-        connect(ph, p, [](const Vec3&) { return 1 / (4 * kPi); });
+        const auto f = [](const Vec3&) { return 1 / (4 * kPi); };
+        connect(ph, p, f);
+        if (merging_) merging_->gather(ph, p, f, perSample_, out_, stats_.merges);
     }
     // Re-emitted light on an opaque, non-specular surface, seen straight from the camera.
     void surfaceScattered(const Photon& ph, const SurfaceHit& hit, const Vec3& n, const Material& mat, double eta) override {
@@ -125,6 +131,7 @@ private:
     Rng& rng_;
     std::vector<FilmSplat>& out_;
     LightTraceStats& stats_;
+    const CameraSegments* merging_;
 };
 
 }  // namespace
@@ -163,7 +170,8 @@ LightTracer::LightTracer(const Scene& scene, const PathTracer& tracer) : scene_(
     }
 }
 
-void LightTracer::trace(uint64_t seed, uint64_t index, std::vector<FilmSplat>& out, LightTraceStats& stats) const {
+void LightTracer::trace(uint64_t seed, uint64_t index, std::vector<FilmSplat>& out, LightTraceStats& stats,
+                        const CameraSegments* merging) const {
     ++stats.photons;
     Rng rng = Rng::forKey(seed, index, 0x6c696768);
     const double u = rng.uniform();
@@ -202,7 +210,7 @@ void LightTracer::trace(uint64_t seed, uint64_t index, std::vector<FilmSplat>& o
         ph.ray = Ray{sl->position, dir};
     }
     if (!(ph.weight > 0)) return;
-    CameraConnections connections(scene_, tracer_, pixelArea_, photonsPerSample(), rng, out, stats);
+    CameraConnections connections(scene_, tracer_, pixelArea_, photonsPerSample(), rng, out, stats, merging);
     walkPhoton(scene_, ph, rng, connections, true);
 }
 

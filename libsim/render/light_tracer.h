@@ -30,11 +30,17 @@ struct FilmSplat {
 struct LightTraceStats {
     uint64_t photons = 0;
     uint64_t connections = 0;  // chains evaluated (after Russian roulette)
+    uint64_t merges = 0;       // photon vertices gathered onto camera segments (render/photon_merging.h)
+    uint64_t mergedSegments = 0;
     void add(const LightTraceStats& o) {
         photons += o.photons;
         connections += o.connections;
+        merges += o.merges;
+        mergedSegments += o.mergedSegments;
     }
 };
+
+class CameraSegments;
 
 class LightTracer {
 public:
@@ -43,8 +49,10 @@ public:
     // inside a medium or inside a stack of shells.
     LightTracer(const Scene& scene, const PathTracer& tracer);
     // Photon `index` of a render with `seed` (its own random stream): appends its splats, scaled so that
-    // tracing photonsPerSample() photons per sample adds their share to the film's mean.
-    void trace(uint64_t seed, uint64_t index, std::vector<FilmSplat>& out, LightTraceStats& stats) const;
+    // tracing photonsPerSample() photons per sample adds their share to the film's mean; with `merging`, also
+    // its merges with the camera segments of the pass.
+    void trace(uint64_t seed, uint64_t index, std::vector<FilmSplat>& out, LightTraceStats& stats,
+               const CameraSegments* merging = nullptr) const;
     // Photons a render traces per sample (per pixel): RenderSettings::photonsPerPixel per pixel of the whole image.
     double photonsPerSample() const {
         return static_cast<double>(scene_.camera.width) * scene_.camera.height * scene_.render.photonsPerPixel;

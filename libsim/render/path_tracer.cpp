@@ -301,6 +301,10 @@ struct PathTracer::PathState {
     // non-specular surface hands only the path's fluorescence to the light tracer (fluorescenceCovered).
     bool cameraPrefix = false, lightTracedSegment = false, fluorescenceCovered = false;
     int enterShells = -1, enterNext = 0;
+    // PathStart::mergedSegments: the path has met only smooth dielectric events (chainEvents of them) and
+    // index-matched crossings, and no collision, since the camera.
+    bool mergePrefix = false;
+    int chainEvents = 0;
 };
 
 PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths& wl, Rng& rng, PathStats& stats,
@@ -317,6 +321,7 @@ PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths&
     state.tMin = start.tMin;
     state.firstSegment = true;
     state.cameraPrefix = start.lightTracedFluorescence && !shells_.empty();
+    state.mergePrefix = start.mergedSegments;
     state.prevScatter = ray.o;
     return trace(state, wl, rng, stats);
 }
@@ -823,7 +828,13 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             // A path at a spectral line estimates the line's delta weight. Re-emitted light is a
             // continuous density and adds nothing to it (the continuous wavelength branch covers it
             // at that wavelength), so such paths never branch; this also ends every cascade there.
-            const bool dyed = !wl.discrete && fluorescence_.active(medium) && !st.lightTracedSegment && !st.fluorescenceCovered;
+            // A segment seen through glass whose light photon merging carries (PathStart::mergedSegments).
+            bool merged = false;
+            if (st.mergePrefix) {
+                if (!med.isHomogeneous() || !hit) st.mergePrefix = false;
+                else merged = st.chainEvents >= 1 && !st.lightTracedSegment;
+            }
+            const bool dyed = !wl.discrete && fluorescence_.active(medium) && !st.lightTracedSegment && !st.fluorescenceCovered && !merged;
             // Branch density per unit of each channel (it is linear in the concentrations).
             const std::array<SampledSpectrum, kMaxMediumChannels> branchPerChannel =
                 dyed ? fluorescence_.branchDensityPerMolar(medium, wl) : std::array<SampledSpectrum, kMaxMediumChannels>{};
@@ -928,11 +939,11 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                         st.firstSegment = false;
                         // A scattering on the camera's first free flight in a stack's liquid: the light tracer's
                         // connections from its photons' vertices there carry everything this path would find.
-                        if (st.lightTracedSegment) {
+                        if (st.lightTracedSegment || merged) {
                             terminated = true;
                             return false;
                         }
-                        st.cameraPrefix = false;
+                        st.cameraPrefix = st.mergePrefix = false;
                         if (beta && r_u) {
                             scatterInMedium(y, med.phase(), med.phase().g(), {});
                             scattered = true;
@@ -1077,6 +1088,9 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         const Vec3 wi = frame.toWorld(bs->wi);
         followChain(bs->transmission && bs->specular, wi);
         advancePrefix(bs->transmission && bs->specular && dot(wi, hit->n) < 0, false);
+        if (st.mergePrefix && !(shape.isInterface && mat.isSpecular() && mat.isTransmissive() && bs->specular &&
+                                ++st.chainEvents <= kMaxMergedChainEvents))
+            st.mergePrefix = false;
         beta *= bs->f * std::abs(bs->wi.z) / bs->pdf;
         r_l = r_u / bs->pdf;
         lightSampledAtLastVertex = !bs->specular;

@@ -137,7 +137,16 @@ struct PathStart {
     // from the camera (index-matched interfaces on the way do not matter). docs/model.md, "Fluorescence
     // traced from the lights".
     bool lightTracedFluorescence = false;
+    // With it (RenderSettings::mergeRadiusPixels > 0), a camera path that reaches a homogeneous medium through
+    // a chain of 1 to kMaxMergedChainEvents smooth dielectric events (reflections or refractions; index-matched
+    // crossings and media passed through on the way do not count), other than the connections' refraction
+    // into a stack above, leaves out the scatterings and branch points of that medium's segment: photon
+    // merging carries them (render/photon_merging.h).
+    bool mergedSegments = false;
 };
+
+// The longest chain of dielectric events before a merged segment (PathStart::mergedSegments).
+inline constexpr int kMaxMergedChainEvents = 8;
 
 // How a sub-path started at a branch point weighs its first vertex's connection to a beam's unscattered
 // light where the camera's imaging computes that emission: 0 on the camera path's first segment (the

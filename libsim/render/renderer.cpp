@@ -11,6 +11,7 @@
 #include "core/memory_cap.h"
 #include "core/message.h"
 #include "core/parallel.h"
+#include "render/photon_merging.h"
 
 namespace fluorosim {
 
@@ -73,6 +74,7 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
     std::vector<Film::Row> staged(static_cast<size_t>(rows));
     PathStart pathStart;
     pathStart.lightTracedFluorescence = lightTracer.has_value();
+    pathStart.mergedSegments = lightTracer.has_value() && scene.render.mergeRadiusPixels > 0;
     auto cancelled = [&] { return options.cancel && options.cancel->load(std::memory_order_relaxed); };
 
     for (int passStart = options.firstSample; passStart < options.spp; passStart += perPass) {
@@ -116,6 +118,10 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
         std::vector<std::vector<FilmSplat>> splats;
         std::vector<LightTraceStats> batchStats;
         if (lightTracer) {
+            // The camera rays' chains into media behind glass, which the photons merge with.
+            std::optional<CameraSegments> merging;
+            if (pathStart.mergedSegments) merging.emplace(scene, tracer, options.seed, passStart, passEnd, threads);
+            const CameraSegments* segments = merging && merging->size() > 0 ? &*merging : nullptr;
             constexpr uint64_t kBatch = 4096;
             const double perSample = lightTracer->photonsPerSample();
             const auto first = static_cast<uint64_t>(passStart * perSample), end = static_cast<uint64_t>(passEnd * perSample);
@@ -127,7 +133,7 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
                 const uint64_t from = first + b * kBatch, to = std::min(end, from + kBatch);
                 for (uint64_t i = from; i < to; ++i) {
                     if ((i & 63) == 0 && cancelled()) return;
-                    lightTracer->trace(options.seed, i, splats[b], batchStats[b]);
+                    lightTracer->trace(options.seed, i, splats[b], batchStats[b], segments);
                 }
                 // A pass holds every batch's splats until it commits them: bounded by the memory cap, judged
                 // from this batch.
@@ -144,6 +150,7 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
                 summary.cancelled = true;
                 break;
             }
+            if (segments && !batchStats.empty()) batchStats[0].mergedSegments += segments->size();
         }
         for (int y = 0; y < rows; ++y) film.commit(staged[static_cast<size_t>(y)]);
         for (size_t b = 0; b < splats.size(); ++b) {

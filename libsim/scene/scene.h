@@ -95,6 +95,9 @@ struct RenderSettings {
     int maxDepth = 100000;  // a safety cap; paths that hit it are counted, never silently
     uint64_t seed = 1;
     int photonsPerPixel = 1;  // Integrator::Light: photons traced per sample per pixel of the image
+    // Integrator::Light: the radius of photon merging behind glass at the first sample, in pixel
+    // footprints at the merged segment (render/photon_merging.h); 0 leaves those paths to the camera.
+    double mergeRadiusPixels = 1;
 };
 
 struct Scene {

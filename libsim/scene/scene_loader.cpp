@@ -330,7 +330,7 @@ private:
     }
 
     void loadRender(const Node& n, Scene& scene) {
-        n.allowOnly({"spp", "max_depth", "seed", "fluorescence", "integrator", "photons_per_pixel"});
+        n.allowOnly({"spp", "max_depth", "seed", "fluorescence", "integrator", "photons_per_pixel", "merge_radius_pixels"});
         if (n.has("integrator")) {
             const auto integrator = integratorFromName(n.at("integrator").str());
             if (!integrator) n.at("integrator").fail("expected \"path\", \"mnee\" or \"light\"");
@@ -343,6 +343,7 @@ private:
         }
         if (n.has("spp")) scene.render.spp = n.at("spp").integer(1, 1 << 24);
         if (n.has("photons_per_pixel")) scene.render.photonsPerPixel = n.at("photons_per_pixel").integer(1, 4096);
+        if (n.has("merge_radius_pixels")) scene.render.mergeRadiusPixels = n.at("merge_radius_pixels").number(0, 64);
         if (n.has("max_depth")) scene.render.maxDepth = n.at("max_depth").integer(1, 100000000);
         if (n.has("seed")) scene.render.seed = static_cast<uint64_t>(n.at("seed").integer(0, 2147483647));
     }

@@ -1,0 +1,275 @@
+#include "render/photon_merging.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+
+#include "core/errors.h"
+#include "core/math.h"
+#include "core/memory_cap.h"
+#include "core/rng.h"
+#include "materials/fresnel.h"
+#include "render/renderer.h"
+
+namespace fluorosim {
+namespace {
+
+// Branches of a chain lighter than this survive Russian roulette with probability weight / kMinBranchWeight
+// (and then weigh that much), so a camera sample follows at most about 1 / kMinBranchWeight branches.
+constexpr double kMinBranchWeight = 0.01;
+// Progressive photon mapping's α: the radius of sample s is r₀ (s + 1)^((α - 1) / 2).
+constexpr double kAlpha = 2.0 / 3.0;
+// Below this cosine between a segment and its entry surface's normal, its kernel disc lies across the ray.
+constexpr double kMinCosDepth = 0.25;
+// The grid has at most this many cells along an axis.
+constexpr int kMaxCellsPerAxis = 128;
+
+struct Branch {
+    Ray ray;
+    int medium = kNone;
+    double tMin = 0;
+    double weight = 1;
+    double distance = 0;  // from the camera along the chain
+    Vec3 entryNormal;     // of the last surface crossed or left, on the side the ray goes
+    int events = 0;
+    std::vector<std::pair<int, double>> crossed;  // (medium, length) of the media passed through
+    // The connections' partition, as PathTracer tracks it (PathState::cameraPrefix).
+    bool cameraPrefix = false, lightTracedSegment = false;
+    int enterShells = -1, enterNext = 0;
+};
+
+// Mirrors PathTracer's advancePrefix: the chain's way into a stack's liquid by refraction alone.
+void advancePrefix(Branch& b, const std::vector<SphericalShells>& shells, uint32_t shape, bool inward, bool indexMatched) {
+    if (!b.cameraPrefix) return;
+    if (b.lightTracedSegment) {
+        b.cameraPrefix = b.lightTracedSegment = false;
+        return;
+    }
+    int s = b.enterShells;
+    if (s < 0)
+        for (size_t i = 0; i < shells.size() && s < 0; ++i)
+            if (shells[i].shape[static_cast<size_t>(shells[i].count - 1)] == shape) s = static_cast<int>(i);
+    const SphericalShells* sh = s >= 0 ? &shells[static_cast<size_t>(s)] : nullptr;
+    if (sh && inward && shape == sh->shape[static_cast<size_t>(sh->count - 1 - b.enterNext)]) {
+        b.enterShells = s;
+        b.lightTracedSegment = ++b.enterNext == sh->count;
+    } else if (!indexMatched) {
+        b.cameraPrefix = false;
+    }
+}
+
+// The lowest extinction of a medium over the scene's spectral range (at its bins' edges and centres):
+// Russian roulette through a medium survives with e^(-σ_low L), a bound on the transmittance there.
+double lowestExtinction(const Scene& scene, const Medium& m) {
+    ChannelValues ch{};
+    m.channelValues(Vec3(0, 0, 0), ch.data());
+    double low = std::numeric_limits<double>::infinity();
+    const double step = scene.spectral.binWidth / 2;
+    for (double l = scene.spectral.lambdaMin; l <= scene.spectral.lambdaMax + 1e-9; l += step) {
+        const MediumSample c = m.spectra(SampledWavelengths::atLine(std::min(l, scene.spectral.lambdaMax), 1.0)).at(ch.data());
+        low = std::min(low, c.sigmaA[0] + c.sigmaS[0]);
+    }
+    return std::max(0.0, low);
+}
+
+}  // namespace
+
+CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uint64_t seed, int sampleBegin, int sampleEnd,
+                               ThreadArena& threads)
+    : scene_(scene), samples_(sampleEnd - sampleBegin) {
+    const Camera& cam = scene.camera;
+    const double footprint = 2 * cam.tanHalfFovY / cam.height * scene.render.mergeRadiusPixels;  // radians per pixel, times the setting
+    std::vector<double> lowSigma(scene.media.size(), 0.0);
+    for (size_t m = 0; m < scene.media.size(); ++m)
+        if (scene.media[m].isHomogeneous()) lowSigma[m] = lowestExtinction(scene, scene.media[m]);
+    const auto& shells = tracer.shells();
+
+    std::vector<std::vector<CameraSegment>> rowSegments(static_cast<size_t>(cam.height));
+    std::vector<std::vector<Crossing>> rowCrossings(static_cast<size_t>(cam.height));
+    threads.parallelFor(static_cast<size_t>(cam.height), [&](size_t row) {
+        const int y = static_cast<int>(row);
+        auto& segs = rowSegments[row];
+        auto& cross = rowCrossings[row];
+        std::vector<Branch> stack;
+        for (int x = 0; x < cam.width; ++x) {
+            const uint64_t pixel = static_cast<uint64_t>(y) * static_cast<uint64_t>(cam.width) + static_cast<uint64_t>(x);
+            for (int s = sampleBegin; s < sampleEnd; ++s) {
+                Rng rng = Rng::forKey(seed, pixel, static_cast<uint64_t>(s) ^ 0x6d65726765000000ULL);
+                const double radiusScale = std::pow(s + 1.0, (kAlpha - 1) / 2);
+                Branch first;
+                first.ray = cameraRay(cam, x, y, rng.uniform(), rng.uniform());
+                first.medium = cam.medium;
+                first.cameraPrefix = !shells.empty();
+                stack.assign(1, first);
+                while (!stack.empty()) {
+                    Branch b = stack.back();
+                    stack.pop_back();
+                    while (true) {
+                        const auto hit = scene.geometry.intersect(b.ray, b.tMin, std::numeric_limits<double>::infinity());
+                        b.tMin = 0;
+                        if (b.medium != kNone && !scene.media[static_cast<size_t>(b.medium)].isVacuumLike()) {
+                            const Medium& med = scene.media[static_cast<size_t>(b.medium)];
+                            if (!med.isHomogeneous() || !hit) break;  // where the camera paths end their chains too
+                            if (!b.lightTracedSegment && b.events >= 1) {
+                                CameraSegment seg;
+                                seg.origin = b.ray.o;
+                                seg.direction = b.ray.d;
+                                seg.length = hit->t;
+                                seg.cosDepth = dot(b.ray.d, b.entryNormal);
+                                seg.depthAxis = b.entryNormal;
+                                if (!(seg.cosDepth >= kMinCosDepth)) {
+                                    seg.depthAxis = b.ray.d;
+                                    seg.cosDepth = 1;
+                                }
+                                seg.radius = std::max(footprint * b.distance * radiusScale, 1e-9 * scene.geometry.extent());
+                                seg.weight = b.weight / (kPi * sqr(seg.radius) * seg.cosDepth);
+                                seg.medium = b.medium;
+                                seg.x = x;
+                                seg.y = y;
+                                seg.prefixBegin = static_cast<uint32_t>(cross.size());
+                                seg.prefixCount = static_cast<uint32_t>(b.crossed.size());
+                                for (const auto& [m, l] : b.crossed) cross.push_back({m, l});
+                                segs.push_back(seg);
+                            }
+                            // On through the medium, by Russian roulette on a bound of its transmittance.
+                            const double survive = std::exp(-lowSigma[static_cast<size_t>(b.medium)] * hit->t);
+                            if (!(rng.uniform() < survive)) break;
+                            b.weight /= survive;
+                            b.crossed.emplace_back(b.medium, hit->t);
+                        }
+                        if (!hit) break;
+                        b.distance += hit->t;
+                        const ShapeInfo& shape = scene.shapes[hit->shape];
+                        const bool entering = dot(b.ray.d, hit->n) < 0;
+                        if (shape.material == kNone) {
+                            if (!shape.isInterface) break;
+                            advancePrefix(b, shells, hit->shape, entering, true);
+                            b.medium = entering ? shape.insideMedium : shape.outsideMedium;
+                            b.entryNormal = entering ? -hit->n : hit->n;
+                            b.ray.o = hit->p;
+                            b.tMin = hit->epsilon / std::max(std::abs(dot(hit->n, b.ray.d)), 1e-2);
+                            continue;
+                        }
+                        const Material& mat = *scene.materials[static_cast<size_t>(shape.material)];
+                        if (!(shape.isInterface && mat.isSpecular() && mat.isTransmissive())) break;
+                        if (++b.events > kMaxMergedChainEvents) break;
+                        const int next = entering ? shape.insideMedium : shape.outsideMedium;
+                        const double n1 = scene.ior(b.medium), n2 = scene.ior(next);
+                        const Vec3 nFacing = entering ? hit->n : -hit->n;
+                        const double cosI = -dot(b.ray.d, nFacing);
+                        Vec3 wt;
+                        const bool refracts = refract(-b.ray.d, nFacing, n2 / n1, &wt);
+                        const double R = refracts ? fresnelDielectric(cosI, n2 / n1) : 1.0;
+                        // Radiance crossing into index n2 toward the camera's side scales by (n1 / n2)².
+                        Branch t = b;
+                        t.weight *= (1 - R) * sqr(n1 / n2);
+                        b.weight *= R;
+                        auto keep = [&](Branch& c) {
+                            if (!(c.weight > 0)) return false;
+                            if (c.weight >= kMinBranchWeight) return true;
+                            if (rng.uniform() * kMinBranchWeight >= c.weight) return false;
+                            c.weight = kMinBranchWeight;
+                            return true;
+                        };
+                        if (refracts && keep(t)) {
+                            advancePrefix(t, shells, hit->shape, dot(wt, hit->n) < 0, false);
+                            t.medium = next;
+                            t.entryNormal = -nFacing;
+                            t.ray = Ray{hit->p, wt};
+                            t.tMin = hit->epsilon / std::max(std::abs(dot(hit->n, wt)), 1e-2);
+                            stack.push_back(t);
+                        }
+                        if (!keep(b)) break;
+                        advancePrefix(b, shells, hit->shape, false, false);
+                        const Vec3 dir = normalize(b.ray.d + nFacing * (2 * cosI));
+                        b.entryNormal = nFacing;
+                        b.ray = Ray{hit->p, dir};
+                        b.tMin = hit->epsilon / std::max(std::abs(dot(hit->n, dir)), 1e-2);
+                    }
+                }
+            }
+        }
+    });
+    for (size_t row = 0; row < rowSegments.size(); ++row) {
+        const uint32_t offset = static_cast<uint32_t>(crossings_.size());
+        for (CameraSegment s : rowSegments[row]) {
+            s.prefixBegin += offset;
+            segments_.push_back(s);
+        }
+        crossings_.insert(crossings_.end(), rowCrossings[row].begin(), rowCrossings[row].end());
+    }
+    if (segments_.empty()) return;
+
+    // The grid: cells at least as wide as the widest segment's diameter, so a vertex looks in one cell.
+    constexpr double inf = std::numeric_limits<double>::infinity();
+    Vec3 lo(inf, inf, inf), hi(-inf, -inf, -inf);
+    double maxRadius = 0;
+    for (const CameraSegment& s : segments_) {
+        const Vec3 end = s.origin + s.direction * s.length;
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min({lo[a], s.origin[a] - s.radius, end[a] - s.radius});
+            hi[a] = std::max({hi[a], s.origin[a] + s.radius, end[a] + s.radius});
+        }
+        maxRadius = std::max(maxRadius, s.radius);
+    }
+    const Vec3 extent = hi - lo;
+    cell_ = std::max(2 * maxRadius, std::max({extent.x, extent.y, extent.z}) / kMaxCellsPerAxis);
+    lo_ = lo;
+    for (int a = 0; a < 3; ++a) dims_[a] = std::max(1, static_cast<int>(std::ceil(extent[a] / cell_)));
+    const size_t cells = static_cast<size_t>(dims_[0]) * static_cast<size_t>(dims_[1]) * static_cast<size_t>(dims_[2]);
+    // Every point within r of a segment lies within r + h/2 of one of its points spaced h apart.
+    std::vector<std::pair<uint32_t, uint32_t>> entries;  // (cell, segment)
+    std::vector<uint32_t> mine;
+    for (size_t i = 0; i < segments_.size(); ++i) {
+        const CameraSegment& s = segments_[i];
+        const double h = cell_ / 2, pad = s.radius + h / 2;
+        const int steps = static_cast<int>(std::ceil(s.length / h));
+        mine.clear();
+        for (int j = 0; j <= steps; ++j) {
+            const Vec3 q = s.origin + s.direction * std::min(s.length, j * h);
+            int a0[3], a1[3];
+            for (int a = 0; a < 3; ++a) {
+                a0[a] = std::clamp(static_cast<int>(std::floor((q[a] - pad - lo_[a]) / cell_)), 0, dims_[a] - 1);
+                a1[a] = std::clamp(static_cast<int>(std::floor((q[a] + pad - lo_[a]) / cell_)), 0, dims_[a] - 1);
+            }
+            for (int cz = a0[2]; cz <= a1[2]; ++cz)
+                for (int cy = a0[1]; cy <= a1[1]; ++cy)
+                    for (int cx = a0[0]; cx <= a1[0]; ++cx) mine.push_back(static_cast<uint32_t>((cz * dims_[1] + cy) * dims_[0] + cx));
+        }
+        std::sort(mine.begin(), mine.end());
+        mine.erase(std::unique(mine.begin(), mine.end()), mine.end());
+        requireMemory(static_cast<double>(entries.size() + mine.size()) * sizeof(entries[0]) + static_cast<double>(cells) * sizeof(uint32_t),
+                      "photon merging's grid of " + std::to_string(segments_.size()) + " camera segments");
+        for (uint32_t c : mine) entries.push_back({c, static_cast<uint32_t>(i)});
+    }
+    cellStart_.assign(cells + 1, 0);
+    for (const auto& e : entries) ++cellStart_[e.first + 1];
+    for (size_t c = 0; c < cells; ++c) cellStart_[c + 1] += cellStart_[c];
+    cellSegments_.resize(entries.size());
+    std::vector<uint32_t> fill(cellStart_.begin(), cellStart_.end() - 1);
+    for (const auto& e : entries) cellSegments_[fill[e.first]++] = e.second;
+}
+
+int CameraSegments::cellOf(const Vec3& p) const {
+    if (segments_.empty()) return -1;
+    int c[3];
+    for (int a = 0; a < 3; ++a) {
+        const double u = (p[a] - lo_[a]) / cell_;
+        if (!(u >= 0 && u < dims_[a])) return -1;
+        c[a] = std::min(dims_[a] - 1, static_cast<int>(u));
+    }
+    return (c[2] * dims_[1] + c[1]) * dims_[0] + c[0];
+}
+
+double CameraSegments::extinction(int medium, double lambda) const {
+    if (medium == kNone) return 0;
+    const Medium& m = scene_.media[static_cast<size_t>(medium)];
+    if (m.isVacuumLike()) return 0;
+    ChannelValues ch{};
+    m.channelValues(Vec3(0, 0, 0), ch.data());
+    const MediumSample c = m.spectra(SampledWavelengths::atLine(lambda, 1.0)).at(ch.data());
+    return c.sigmaA[0] + c.sigmaS[0];
+}
+
+}  // namespace fluorosim

@@ -1,0 +1,103 @@
+#pragma once
+// Photon merging along camera rays that reach a medium through glass (Integrator::Light): the light a
+// camera path would find in a homogeneous medium it sees through a chain of smooth dielectric events
+// (reflections off a glass sphere, refraction through a vial's mesh walls), which no connection reaches
+// because the chain is not a plain refraction through one stack of spheres. Each pass traces the camera
+// rays' chains first, with both Fresnel branches followed (Russian roulette on light ones), and keeps
+// the straight segments they cross in such media. The light tracer's photons then gather onto every
+// segment that passes within a radius r of one of their vertices (a scattering, or a re-emission): the
+// beam radiance estimate of Jarosz et al. 2008, with the exact transmittance along the ray at the photon's
+// own wavelength, and a disc kernel of radius r that lies parallel to the surface the segment entered by,
+// not across the ray: the light near a boundary varies fast with depth, and a disc across an oblique ray
+// would average it over depths, and reach outside the medium where there are no photons. r is the pixel's footprint at the segment times
+// RenderSettings::mergeRadiusPixels, reduced with the sample index as in progressive photon mapping
+// (r² ∝ s^(α-1), α = 2/3), so the blur it adds vanishes as samples grow. The camera paths leave exactly
+// these segments out (PathStart::mergedSegments); docs/model.md, "Photon merging behind glass".
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "core/parallel.h"
+#include "render/light_tracer.h"
+#include "render/photon_tracer.h"
+#include "scene/scene.h"
+
+namespace fluorosim {
+
+// One straight piece of a camera ray's chain inside a homogeneous, non-vacuum medium.
+struct CameraSegment {
+    Vec3 origin, direction;  // unit direction, away from the camera
+    Vec3 depthAxis;          // the kernel disc's normal: the entry surface's, into the medium (or the direction)
+    double cosDepth = 1;     // dot(direction, depthAxis)
+    double length = 0;
+    double radius = 0;
+    double weight = 0;  // the chain's branch weight over n² of the medium, over π r²
+    int medium = kNone;
+    int32_t x = 0, y = 0;  // the pixel
+    uint32_t prefixBegin = 0, prefixCount = 0;  // the media crossed before it (CameraSegments::Crossing)
+};
+
+class CameraSegments {
+public:
+    // Traces the chains of samples [sampleBegin, sampleEnd) of every pixel (row by row on `threads`) and
+    // indexes their segments. `tracer` supplies the stacks of spheres of the connections' partition.
+    CameraSegments(const Scene& scene, const PathTracer& tracer, uint64_t seed, int sampleBegin, int sampleEnd, ThreadArena& threads);
+
+    // Adds to `out` the merges of a photon's vertex at p with every segment within reach; `phase(w)` is the
+    // vertex's phase function toward w. The pass traces `photonsPerSample` photons for each of its samples,
+    // and every one of them merges with every segment of the pass.
+    template <class Phase>
+    void gather(const Photon& ph, const Vec3& p, Phase&& phase, double photonsPerSample, std::vector<FilmSplat>& out,
+                uint64_t& merges) const;
+
+    size_t size() const { return segments_.size(); }
+
+private:
+    struct Crossing {
+        int medium;
+        double length;
+    };
+    // σt at the photon's wavelength of every medium, computed once per wavelength.
+    double extinction(int medium, double lambda) const;
+    int cellOf(const Vec3& p) const;
+
+    const Scene& scene_;
+    double samples_;  // per pixel in the pass
+    std::vector<CameraSegment> segments_;
+    std::vector<Crossing> crossings_;
+    // A uniform grid over the segments' reach: cellStart_[c]..cellStart_[c+1] in cellSegments_.
+    Vec3 lo_;
+    double cell_ = 1;
+    int dims_[3] = {0, 0, 0};
+    std::vector<uint32_t> cellStart_, cellSegments_;
+};
+
+template <class Phase>
+void CameraSegments::gather(const Photon& ph, const Vec3& p, Phase&& phase, double photonsPerSample, std::vector<FilmSplat>& out,
+                            uint64_t& merges) const {
+    const int c = cellOf(p);
+    if (c < 0) return;
+    const double photonsPerSegment = photonsPerSample * samples_;
+    double sigmaT = -1;
+    for (uint32_t k = cellStart_[static_cast<size_t>(c)]; k < cellStart_[static_cast<size_t>(c) + 1]; ++k) {
+        const CameraSegment& s = segments_[cellSegments_[k]];
+        if (s.medium != ph.medium) continue;
+        // The point of the ray at p's depth, and p's distance from it along the disc.
+        const Vec3 v = p - s.origin;
+        const double t = dot(v, s.depthAxis) / s.cosDepth;
+        if (!(t >= 0 && t <= s.length)) continue;
+        const Vec3 w = v - s.direction * t;
+        if (dot(w, w) > s.radius * s.radius) continue;
+        ++merges;
+        const double f = phase(-s.direction);
+        if (!(f > 0)) continue;
+        if (sigmaT < 0) sigmaT = extinction(ph.medium, ph.lambda);
+        double opticalDepth = sigmaT * t;
+        for (uint32_t i = s.prefixBegin; i < s.prefixBegin + s.prefixCount; ++i)
+            opticalDepth += extinction(crossings_[i].medium, ph.lambda) * crossings_[i].length;
+        const double value = ph.weight * f * std::exp(-opticalDepth) * s.weight / photonsPerSegment;
+        if (value > 0) out.push_back(FilmSplat{s.x, s.y, ph.lambda, value, ph.fluorescent});
+    }
+}
+
+}  // namespace fluorosim
