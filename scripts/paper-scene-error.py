@@ -7,7 +7,9 @@ over the pixels of the dyed liquid, estimated from the two seeds (per-pixel vari
 half the squared difference), divided by the mean fluorescent value there, and the seconds per render.
 
 The liquid's pixels: those whose central camera ray meets a liquid-filled sphere's glass (the shapes of
-type sphere whose "interior" is a dyed medium, grown to the glass shell around them). Spheres only.
+type sphere whose "interior" is a dyed medium, grown to the glass shell around them). Meshes (the vials):
+those whose central ray meets the vertical cylinder around the glass mesh that holds a dyed liquid mesh
+(the mesh's x-z radius and y range, translated as the scene places it).
 With --whole: the whole image's total (elastic + fluorescent) RGB instead, for scenes without dyes.
 
 Usage: PYTHONPATH=build/python scripts/paper-scene-error.py [--whole] SCENE.json path:40 mnee:4 light:32 light:32:0 ...
@@ -39,6 +41,24 @@ def liquid_mask(scene):
     dyed = {k for k, m in scene["media"].items() if m.get("dyes")}
     liquids = [sh for sh in scene["shapes"] if sh["type"] == "sphere" and sh.get("interior") in dyed]
     mask = np.zeros((h, w), bool)
+    # Meshes of a dyed liquid: the vertical cylinder around the glass mesh at the same place.
+    base = scene.get("_base", ".")
+    for sh in scene["shapes"]:
+        if sh["type"] != "mesh" or sh.get("interior") not in dyed:
+            continue
+        glass = [o for o in scene["shapes"] if o["type"] == "mesh" and o.get("translate") == sh.get("translate") and o is not sh]
+        obj = (glass or [sh])[0]["file"]
+        v = np.array([[float(x) for x in line.split()[1:4]] for line in open(f"{base}/{obj}") if line.startswith("v ")])
+        t = mm(sh.get("translate", ["0 mm"] * 3))
+        radius, y0, y1 = np.sqrt(v[:, 0] ** 2 + v[:, 2] ** 2).max(), v[:, 1].min() + t[1], v[:, 1].max() + t[1]
+        # Ray pos + s d against x² + z² = r² around (t.x, t.z), then the hit's height.
+        ox, oz = pos[0] - t[0], pos[2] - t[2]
+        a = d[..., 0] ** 2 + d[..., 2] ** 2
+        b = ox * d[..., 0] + oz * d[..., 2]
+        disc = b * b - a * (ox * ox + oz * oz - radius * radius)
+        sHit = (-b - np.sqrt(np.maximum(disc, 0))) / np.maximum(a, 1e-12)
+        yHit = pos[1] + sHit * d[..., 1]
+        mask |= (disc > 0) & (yHit >= y0) & (yHit <= y1)
     for sh in liquids:
         c = mm(sh["center"])
         # The glass shell around the liquid: the largest sphere with the same centre.
@@ -62,8 +82,11 @@ def main():
     with open(path) as f:
         scene = json.load(f)
     w, h = scene["camera"]["resolution"]
+    scene["_base"] = path.rsplit("/", 1)[0] if "/" in path else "."
     mask = np.ones((h, w), bool) if whole else liquid_mask(scene)
+    del scene["_base"]
     layer = (lambda r: r["rgb"].sum(axis=2)) if whole else fluorescent
+
     base = path.rsplit("/", 1)[0] if "/" in path else "."
     for spec in args[1:]:
         integrator, spp, *radius = spec.split(":")

@@ -9,11 +9,15 @@
 // beam radiance estimate of Jarosz et al. 2008, with the exact transmittance along the ray at the photon's
 // own wavelength, and a disc kernel of radius r that lies parallel to the surface the segment entered by,
 // not across the ray: the light near a boundary varies fast with depth, and a disc across an oblique ray
-// would average it over depths, and reach outside the medium where there are no photons. r is the pixel's footprint at the segment times
+// would average it over depths, and reach outside the medium where there are no photons. Where the disc
+// still reaches past the medium's sides (near an edge of a box or a vial), it is divided by the part of its
+// area inside, measured by rays along it (a surface curving away from the disc, as a sphere's, is not a
+// side: the light follows it). r is the pixel's footprint at the segment times
 // RenderSettings::mergeRadiusPixels, reduced with the sample index as in progressive photon mapping
 // (r² ∝ s^(α-1), α = 2/3), so the blur it adds vanishes as samples grow. The camera paths leave exactly
 // these segments out (PathStart::mergedSegments); docs/model.md, "Photon merging behind glass".
 #include <cmath>
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -35,6 +39,10 @@ struct CameraSegment {
     int medium = kNone;
     int32_t x = 0, y = 0;  // the pixel
     uint32_t prefixBegin = 0, prefixCount = 0;  // the media crossed before it (CameraSegments::Crossing)
+    // The part of the kernel disc inside the medium, at depths t = 0, step, 2 step, ... along the segment
+    // (CameraSegments::inside_), beyond the last the last.
+    uint32_t insideBegin = 0, insideCount = 0;
+    double insideStep = 1;
 };
 
 class CameraSegments {
@@ -65,6 +73,7 @@ private:
     double samples_;  // per pixel in the pass
     std::vector<CameraSegment> segments_;
     std::vector<Crossing> crossings_;
+    std::vector<float> inside_;
     // A uniform grid over the segments' reach: cellStart_[c]..cellStart_[c+1] in cellSegments_.
     Vec3 lo_;
     double cell_ = 1;
@@ -95,7 +104,8 @@ void CameraSegments::gather(const Photon& ph, const Vec3& p, Phase&& phase, doub
         double opticalDepth = sigmaT * t;
         for (uint32_t i = s.prefixBegin; i < s.prefixBegin + s.prefixCount; ++i)
             opticalDepth += extinction(crossings_[i].medium, ph.lambda) * crossings_[i].length;
-        const double value = ph.weight * f * std::exp(-opticalDepth) * s.weight / photonsPerSegment;
+        const uint32_t j = std::min(s.insideCount - 1, static_cast<uint32_t>(t / s.insideStep + 0.5));
+        const double value = ph.weight * f * std::exp(-opticalDepth) * s.weight / (photonsPerSegment * inside_[s.insideBegin + j]);
         if (value > 0) out.push_back(FilmSplat{s.x, s.y, ph.lambda, value, ph.fluorescent});
     }
 }

@@ -32,9 +32,25 @@ struct SphereScene {
     bool floor = false;
     bool neighbour = false;  // a second dyed sphere behind and to the right, seen in the first's glass and through it
     bool lens = false;       // a solid glass ball between the camera and the sphere: all of it is seen through the ball
+    bool box = false;        // the liquid and the glass are boxes (triangle meshes, as the vials), not spheres
     double mergeRadiusPixels = 1;
     Integrator integrator = Integrator::Light;
 };
+
+// A closed box mesh with outward normals (counter-clockwise seen from outside), an interface between media.
+void addInterfaceBox(Scene& scene, const Vec3& c, double half, int inside, int outside, int material) {
+    TriangleMesh m;
+    for (int i = 0; i < 8; ++i) m.positions.push_back(c + Vec3(i & 1 ? half : -half, i & 2 ? half : -half, i & 4 ? half : -half));
+    m.indices = {0, 2, 1, 1, 2, 3, 4, 5, 6, 5, 7, 6, 0, 1, 4, 1, 5, 4, 2, 6, 3, 3, 6, 7, 0, 4, 2, 2, 4, 6, 1, 3, 5, 3, 7, 5};
+    scene.geometry.addMesh(std::move(m));
+    ShapeInfo info;
+    info.name = "box";
+    info.isInterface = true;
+    info.insideMedium = inside;
+    info.outsideMedium = outside;
+    info.material = material;
+    scene.shapes.push_back(info);
+}
 
 Scene sphereScene(const SphereScene& o) {
     Scene scene;
@@ -42,8 +58,13 @@ Scene sphereScene(const SphereScene& o) {
     const int liquid = testing::addDyedMedium(scene, "liquid", 0.0, 2.0, 0.3, o.liquidIor, {{testing::databaseDye("AF488"), 20e-6}});
     const int glass = addMedium(scene, "glass", 0.0, 0.0, 0.0, o.glassIor);
     scene.materials.push_back(makeDielectric(0.0));
-    addInterfaceSphere(scene, Vec3(0, 0, 0), 1.0, liquid, glass, 0);
-    addInterfaceSphere(scene, Vec3(0, 0, 0), 1.2, glass, kNone, 0);
+    if (o.box) {
+        addInterfaceBox(scene, Vec3(0, 0, 0), 0.8, liquid, glass, 0);
+        addInterfaceBox(scene, Vec3(0, 0, 0), 0.95, glass, kNone, 0);
+    } else {
+        addInterfaceSphere(scene, Vec3(0, 0, 0), 1.0, liquid, glass, 0);
+        addInterfaceSphere(scene, Vec3(0, 0, 0), 1.2, glass, kNone, 0);
+    }
     if (o.neighbour) {
         addInterfaceSphere(scene, Vec3(1.5, 0, 2), 1.0, liquid, glass, 0);
         addInterfaceSphere(scene, Vec3(1.5, 0, 2), 1.2, glass, kNone, 0);
@@ -199,6 +220,15 @@ TEST(LightTracer, ASphereSeenThroughALensAgreesWithManifoldNextEventEstimation) 
     o.lens = true;
     QuadrantEstimate mnee;
     expectAgreement(both(o, 16, 64, &mnee), mnee);
+}
+
+// Glass and liquid as triangle meshes (boxes, as the vials are cylinders): no connection applies, and
+// everything seen through the glass is merged.
+TEST(LightTracer, ALiquidInAGlassBoxAgreesWithManifoldNextEventEstimation) {
+    SphereScene o;
+    o.box = true;
+    QuadrantEstimate mnee;
+    expectAgreement(both(o, 32, 4096, &mnee), mnee);
 }
 
 // What merging adds, isolated: the same seeds with merging on and off differ only on the camera paths that

@@ -273,6 +273,13 @@ TEST(Cli, UnknownIntegratorIsRefusedFromTheCommandLineAndTheScene) {
     const auto z = runCli(dir, {"render", zero.string(), "-o", (dir.path() / "o.exr").string()});
     EXPECT_EQ(z.exitCode, 2);
     expectOneLineError(z, {zero.string(), "/render/photons_per_pixel", "got 0"});
+    // So is the merging radius.
+    j["render"]["photons_per_pixel"] = 1;
+    j["render"]["merge_radius_pixels"] = -1;
+    const auto negative = dir.write("negative.json", j.dump());
+    const auto n = runCli(dir, {"render", negative.string(), "-o", (dir.path() / "o.exr").string()});
+    EXPECT_EQ(n.exitCode, 2);
+    expectOneLineError(n, {negative.string(), "/render/merge_radius_pixels", "-1"});
 }
 
 TEST(Cli, InterruptBySigintIsHandledLikeSigterm) {
