@@ -47,6 +47,7 @@ public:
     // Re-emitted light on an opaque, non-specular surface, seen straight from the camera.
     void surfaceScattered(const Photon& ph, const SurfaceHit& hit, const Vec3& n, const Material& mat, double eta) override {
         if (!ph.fluorescent || mat.isSpecular() || mat.isTransmissive()) return;
+        if (merging_) merging_->gatherOnSurface(ph, hit, n, perSample_, out_, stats_.merges);
         const Camera& cam = scene_.camera;
         const Vec3 toCamera = cam.position - hit.p;
         const double d2 = dot(toCamera, toCamera);

@@ -1065,6 +1065,8 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             st.fluorescenceCovered = true;
             st.cameraPrefix = false;
         }
+        // The same surface seen through a chain of dielectric events: photon merging's (PathStart::mergedSegments).
+        if (st.mergePrefix && st.chainEvents >= 1 && !mat.isSpecular() && !mat.isTransmissive()) st.fluorescenceCovered = true;
         // Opaque surfaces are two-sided; interfaces keep their outward orientation.
         const Vec3 n = shape.isInterface ? hit->n : faceForward(hit->n, -ray.d);
         const double eta = scene_.ior(shape.insideMedium) / scene_.ior(shape.outsideMedium);

@@ -10,6 +10,7 @@
 #include "core/memory_cap.h"
 #include "core/rng.h"
 #include "materials/fresnel.h"
+#include "materials/material.h"
 #include "render/renderer.h"
 
 namespace fluorosim {
@@ -160,7 +161,28 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                             continue;
                         }
                         const Material& mat = *scene.materials[static_cast<size_t>(shape.material)];
-                        if (!(shape.isInterface && mat.isSpecular() && mat.isTransmissive())) break;
+                        if (!(shape.isInterface && mat.isSpecular() && mat.isTransmissive())) {
+                            // The chain ends on an opaque, non-specular surface: its re-emitted light is the photons'.
+                            if (b.events >= 1 && !mat.isSpecular() && !mat.isTransmissive()) {
+                                CameraSegment seg;
+                                seg.surface = true;
+                                seg.origin = hit->p;
+                                seg.direction = b.ray.d;
+                                seg.normal = shape.isInterface ? hit->n : faceForward(hit->n, -b.ray.d);
+                                seg.material = &mat;
+                                seg.eta = scene.ior(shape.insideMedium) / scene.ior(shape.outsideMedium);
+                                seg.medium = static_cast<int>(hit->shape);  // the shape, for surfaces
+                                seg.radius = std::max(footprint * b.distance * radiusScale, 1e-9 * scene.geometry.extent());
+                                seg.weight = b.weight / (kPi * sqr(seg.radius));
+                                seg.x = x;
+                                seg.y = y;
+                                seg.prefixBegin = static_cast<uint32_t>(cross.size());
+                                seg.prefixCount = static_cast<uint32_t>(b.crossed.size());
+                                for (const auto& [m, l] : b.crossed) cross.push_back({m, l});
+                                segs.push_back(seg);
+                            }
+                            break;
+                        }
                         if (++b.events > kMaxMergedChainEvents) break;
                         const int next = entering ? shape.insideMedium : shape.outsideMedium;
                         const double n1 = scene.ior(b.medium), n2 = scene.ior(next);
@@ -217,6 +239,11 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
     threads.parallelFor((segments_.size() + kChunk - 1) / kChunk, [&](size_t chunk) {
         for (size_t i = chunk * kChunk; i < std::min(segments_.size(), (chunk + 1) * kChunk); ++i) {
             CameraSegment& s = segments_[i];
+            if (s.surface) {
+                s.insideCount = 1;
+                fractions[i][0] = 1;
+                continue;
+            }
             s.insideStep = std::max(s.radius / 2, s.length / kInsideDepths);
             s.insideCount = static_cast<uint32_t>(std::min<double>(kInsideDepths, std::floor(s.length / s.insideStep) + 1));
             const Frame disc = Frame::fromNormal(s.depthAxis);
@@ -301,6 +328,33 @@ int CameraSegments::cellOf(const Vec3& p) const {
         c[a] = std::min(dims_[a] - 1, static_cast<int>(u));
     }
     return (c[2] * dims_[1] + c[1]) * dims_[0] + c[0];
+}
+
+double CameraSegments::prefixOpticalDepth(const CameraSegment& s, double lambda) const {
+    double depth = 0;
+    for (uint32_t i = s.prefixBegin; i < s.prefixBegin + s.prefixCount; ++i) depth += extinction(crossings_[i].medium, lambda) * crossings_[i].length;
+    return depth;
+}
+
+void CameraSegments::gatherOnSurface(const Photon& ph, const SurfaceHit& hit, const Vec3& n, double photonsPerSample, std::vector<FilmSplat>& out,
+                                     uint64_t& merges) const {
+    const int c = cellOf(hit.p);
+    if (c < 0) return;
+    const double photonsPerSegment = photonsPerSample * samples_;
+    for (uint32_t k = cellStart_[static_cast<size_t>(c)]; k < cellStart_[static_cast<size_t>(c) + 1]; ++k) {
+        const CameraSegment& s = segments_[cellSegments_[k]];
+        if (!s.surface || s.medium != static_cast<int>(hit.shape) || dot(s.normal, n) < 0.99) continue;
+        const Vec3 v = hit.p - s.origin;
+        if (dot(v, v) > s.radius * s.radius) continue;
+        ++merges;
+        const Frame frame = Frame::fromNormal(s.normal);
+        const Vec3 wo = frame.toLocal(-s.direction), wi = frame.toLocal(-ph.ray.d);
+        if (!(wo.z > 0 && wi.z > 0)) continue;
+        const double f = s.material->f(wo, wi, SampledWavelengths::atLine(ph.lambda, 1.0), s.eta, TransportMode::Radiance)[0];
+        if (!(f > 0)) continue;
+        const double value = ph.weight * f * std::exp(-prefixOpticalDepth(s, ph.lambda)) * s.weight / photonsPerSegment;
+        if (value > 0) out.push_back(FilmSplat{s.x, s.y, ph.lambda, value, true});
+    }
 }
 
 double CameraSegments::extinction(int medium, double lambda) const {

@@ -28,8 +28,14 @@
 
 namespace fluorosim {
 
-// One straight piece of a camera ray's chain inside a homogeneous, non-vacuum medium.
+// One straight piece of a camera ray's chain inside a homogeneous, non-vacuum medium, or (surface) the
+// opaque, non-specular surface point where a chain ends, whose re-emitted light the photons that land
+// there carry (photon mapping on surfaces, fluorescence only).
 struct CameraSegment {
+    bool surface = false;
+    Vec3 normal;  // surface: the shading side the chain arrives on
+    const Material* material = nullptr;
+    double eta = 1;
     Vec3 origin, direction;  // unit direction, away from the camera
     Vec3 depthAxis;          // the kernel disc's normal: the entry surface's, into the medium (or the direction)
     double cosDepth = 1;     // dot(direction, depthAxis)
@@ -58,6 +64,11 @@ public:
     void gather(const Photon& ph, const Vec3& p, Phase&& phase, double photonsPerSample, std::vector<FilmSplat>& out,
                 uint64_t& merges) const;
 
+    // A re-emitted photon about to scatter off an opaque surface at hit (n on its side): its merges with
+    // the surface points within reach on the same shape, f_BSDF Φ / (π r²) each.
+    void gatherOnSurface(const Photon& ph, const SurfaceHit& hit, const Vec3& n, double photonsPerSample, std::vector<FilmSplat>& out,
+                         uint64_t& merges) const;
+
     size_t size() const { return segments_.size(); }
 
 private:
@@ -65,8 +76,9 @@ private:
         int medium;
         double length;
     };
-    // σt at the photon's wavelength of every medium, computed once per wavelength.
+    // σt of a homogeneous medium at a wavelength (0 for none or vacuum-like).
     double extinction(int medium, double lambda) const;
+    double prefixOpticalDepth(const CameraSegment& s, double lambda) const;
     int cellOf(const Vec3& p) const;
 
     const Scene& scene_;
@@ -90,7 +102,7 @@ void CameraSegments::gather(const Photon& ph, const Vec3& p, Phase&& phase, doub
     double sigmaT = -1;
     for (uint32_t k = cellStart_[static_cast<size_t>(c)]; k < cellStart_[static_cast<size_t>(c) + 1]; ++k) {
         const CameraSegment& s = segments_[cellSegments_[k]];
-        if (s.medium != ph.medium) continue;
+        if (s.surface || s.medium != ph.medium) continue;
         // The point of the ray at p's depth, and p's distance from it along the disc.
         const Vec3 v = p - s.origin;
         const double t = dot(v, s.depthAxis) / s.cosDepth;
@@ -101,9 +113,7 @@ void CameraSegments::gather(const Photon& ph, const Vec3& p, Phase&& phase, doub
         const double f = phase(-s.direction);
         if (!(f > 0)) continue;
         if (sigmaT < 0) sigmaT = extinction(ph.medium, ph.lambda);
-        double opticalDepth = sigmaT * t;
-        for (uint32_t i = s.prefixBegin; i < s.prefixBegin + s.prefixCount; ++i)
-            opticalDepth += extinction(crossings_[i].medium, ph.lambda) * crossings_[i].length;
+        const double opticalDepth = sigmaT * t + prefixOpticalDepth(s, ph.lambda);
         const uint32_t j = std::min(s.insideCount - 1, static_cast<uint32_t>(t / s.insideStep + 0.5));
         const double value = ph.weight * f * std::exp(-opticalDepth) * s.weight / (photonsPerSegment * inside_[s.insideBegin + j]);
         if (value > 0) out.push_back(FilmSplat{s.x, s.y, ph.lambda, value, ph.fluorescent});
