@@ -106,6 +106,17 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
             for (int s = sampleBegin; s < sampleEnd; ++s) {
                 Rng rng = Rng::forKey(seed, pixel, static_cast<uint64_t>(s) ^ 0x6d65726765000000ULL);
                 const double radiusScale = std::pow(s + 1.0, (kAlpha - 1) / 2);
+                // A segment or surface point of branch b: its radius, kernel weight, pixel and the media before it.
+                auto store = [&](CameraSegment& seg, const Branch& b, double cosDepth) {
+                    seg.radius = std::max(footprint * b.distance * radiusScale, 1e-9 * scene.geometry.extent());
+                    seg.weight = b.weight / (kPi * sqr(seg.radius) * cosDepth);
+                    seg.x = x;
+                    seg.y = y;
+                    seg.prefixBegin = static_cast<uint32_t>(cross.size());
+                    seg.prefixCount = static_cast<uint32_t>(b.crossed.size());
+                    for (const auto& [m, l] : b.crossed) cross.push_back({m, l});
+                    segs.push_back(seg);
+                };
                 Branch first;
                 first.ray = cameraRay(cam, x, y, rng.uniform(), rng.uniform());
                 first.medium = cam.medium;
@@ -131,15 +142,8 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                                     seg.depthAxis = b.ray.d;
                                     seg.cosDepth = 1;
                                 }
-                                seg.radius = std::max(footprint * b.distance * radiusScale, 1e-9 * scene.geometry.extent());
-                                seg.weight = b.weight / (kPi * sqr(seg.radius) * seg.cosDepth);
                                 seg.medium = b.medium;
-                                seg.x = x;
-                                seg.y = y;
-                                seg.prefixBegin = static_cast<uint32_t>(cross.size());
-                                seg.prefixCount = static_cast<uint32_t>(b.crossed.size());
-                                for (const auto& [m, l] : b.crossed) cross.push_back({m, l});
-                                segs.push_back(seg);
+                                store(seg, b, seg.cosDepth);
                             }
                             // On through the medium, by Russian roulette on a bound of its transmittance.
                             const double survive = std::exp(-lowSigma[static_cast<size_t>(b.medium)] * hit->t);
@@ -172,14 +176,7 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                                 seg.material = &mat;
                                 seg.eta = scene.ior(shape.insideMedium) / scene.ior(shape.outsideMedium);
                                 seg.medium = static_cast<int>(hit->shape);  // the shape, for surfaces
-                                seg.radius = std::max(footprint * b.distance * radiusScale, 1e-9 * scene.geometry.extent());
-                                seg.weight = b.weight / (kPi * sqr(seg.radius));
-                                seg.x = x;
-                                seg.y = y;
-                                seg.prefixBegin = static_cast<uint32_t>(cross.size());
-                                seg.prefixCount = static_cast<uint32_t>(b.crossed.size());
-                                for (const auto& [m, l] : b.crossed) cross.push_back({m, l});
-                                segs.push_back(seg);
+                                store(seg, b, 1.0);
                             }
                             break;
                         }
@@ -195,14 +192,14 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                         Branch t = b;
                         t.weight *= (1 - R) * sqr(n1 / n2);
                         b.weight *= R;
-                        auto keep = [&](Branch& c) {
+                        auto survives = [&](Branch& c) {
                             if (!(c.weight > 0)) return false;
                             if (c.weight >= kMinBranchWeight) return true;
                             if (rng.uniform() * kMinBranchWeight >= c.weight) return false;
                             c.weight = kMinBranchWeight;
                             return true;
                         };
-                        if (refracts && keep(t)) {
+                        if (refracts && survives(t)) {
                             advancePrefix(t, shells, hit->shape, dot(wt, hit->n) < 0, false);
                             t.medium = next;
                             t.entryNormal = -nFacing;
@@ -210,7 +207,7 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                             t.tMin = hit->epsilon / std::max(std::abs(dot(hit->n, wt)), 1e-2);
                             stack.push_back(t);
                         }
-                        if (!keep(b)) break;
+                        if (!survives(b)) break;
                         advancePrefix(b, shells, hit->shape, false, false);
                         const Vec3 dir = normalize(b.ray.d + nFacing * (2 * cosI));
                         b.entryNormal = nFacing;

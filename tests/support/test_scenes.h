@@ -25,16 +25,20 @@ inline int addMedium(Scene& scene, const std::string& name, double sigmaA, doubl
     return static_cast<int>(scene.media.size()) - 1;
 }
 
-inline uint32_t addInterfaceSphere(Scene& scene, const Vec3& c, double r, int inside, int outside, int material = kNone) {
-    const uint32_t id = scene.geometry.addSphere(c, r);
+// Describes shape `id` (just added to the geometry) as an interface between two media.
+inline uint32_t addInterfaceInfo(Scene& scene, uint32_t id, const char* name, int inside, int outside, int material) {
     ShapeInfo info;
-    info.name = "sphere";
+    info.name = name;
     info.isInterface = true;
     info.insideMedium = inside;
     info.outsideMedium = outside;
     info.material = material;
     scene.shapes.push_back(info);
     return id;
+}
+
+inline uint32_t addInterfaceSphere(Scene& scene, const Vec3& c, double r, int inside, int outside, int material = kNone) {
+    return addInterfaceInfo(scene, scene.geometry.addSphere(c, r), "sphere", inside, outside, material);
 }
 
 struct Estimate {
