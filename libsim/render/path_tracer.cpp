@@ -130,6 +130,25 @@ int PathTracer::shellsAround(const Vec3& p, int medium) const {
     return -1;
 }
 
+void StackEntry::meet(const std::vector<SphericalShells>& shells, uint32_t shape, bool inward, bool indexMatched) {
+    if (!open) return;
+    if (inLiquid) {  // left the liquid without a collision
+        open = inLiquid = false;
+        return;
+    }
+    int s = stack;
+    if (s < 0)
+        for (size_t i = 0; i < shells.size() && s < 0; ++i)
+            if (shells[i].shape[static_cast<size_t>(shells[i].count - 1)] == shape) s = static_cast<int>(i);
+    const SphericalShells* sh = s >= 0 ? &shells[static_cast<size_t>(s)] : nullptr;
+    if (sh && inward && shape == sh->shape[static_cast<size_t>(sh->count - 1 - crossed)]) {
+        stack = s;
+        inLiquid = ++crossed == sh->count;
+    } else if (!indexMatched) {
+        open = false;
+    }
+}
+
 int PathTracer::mediumAfterCrossing(const ShapeInfo& shape, const Vec3& n, const Vec3& dir, int current) const {
     if (!shape.isInterface) return current;
     return dot(dir, n) < 0 ? shape.insideMedium : shape.outsideMedium;
@@ -294,13 +313,12 @@ struct PathTracer::PathState {
     const EmissionLabels* labels = nullptr;  // camera paths only: split re-emissions by label
     const ExcitationField* field = nullptr;  // the excitation at lines, looked up where it reaches (all generations)
     std::vector<PathRadiance::Labelled> labelled;
-    // PathStart::lightTracedFluorescence: the path is still on its way from the camera into the liquid of
-    // shells_[enterShells] (it has refracted inward through enterNext of its interfaces, outermost first);
-    // once inside (lightTracedSegment) its first free flight there has no branch points, and a scattering
-    // on it ends the path: the light tracer carries all its light from there. A first vertex on an opaque,
-    // non-specular surface hands only the path's fluorescence to the light tracer (fluorescenceCovered).
-    bool cameraPrefix = false, lightTracedSegment = false, fluorescenceCovered = false;
-    int enterShells = -1, enterNext = 0;
+    // PathStart::lightTracedFluorescence: the path's way into a stack's liquid; once inside (entry.inLiquid)
+    // its first free flight there has no branch points, and a scattering on it ends the path: the light
+    // tracer carries all its light from there. A first vertex on an opaque, non-specular surface hands only
+    // the path's fluorescence to the light tracer (fluorescenceCovered).
+    StackEntry entry;
+    bool fluorescenceCovered = false;
     // PathStart::mergedSegments: the path has met only smooth dielectric events (chainEvents of them) and
     // index-matched crossings, and no collision, since the camera.
     bool mergePrefix = false;
@@ -320,7 +338,7 @@ PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths&
     state.field = start.field;
     state.tMin = start.tMin;
     state.firstSegment = true;
-    state.cameraPrefix = start.lightTracedFluorescence && !shells_.empty();
+    state.entry.open = start.lightTracedFluorescence && !shells_.empty();
     state.mergePrefix = start.mergedSegments;
     state.prevScatter = ray.o;
     return trace(state, wl, rng, stats);
@@ -832,9 +850,9 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             bool merged = false;
             if (st.mergePrefix) {
                 if (!med.isHomogeneous() || !hit) st.mergePrefix = false;
-                else merged = st.chainEvents >= 1 && !st.lightTracedSegment;
+                else merged = st.chainEvents >= 1 && !st.entry.inLiquid;
             }
-            const bool dyed = !wl.discrete && fluorescence_.active(medium) && !st.lightTracedSegment && !st.fluorescenceCovered && !merged;
+            const bool dyed = !wl.discrete && fluorescence_.active(medium) && !st.entry.inLiquid && !st.fluorescenceCovered && !merged;
             // Branch density per unit of each channel (it is linear in the concentrations).
             const std::array<SampledSpectrum, kMaxMediumChannels> branchPerChannel =
                 dyed ? fluorescence_.branchDensityPerMolar(medium, wl) : std::array<SampledSpectrum, kMaxMediumChannels>{};
@@ -939,11 +957,11 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                         st.firstSegment = false;
                         // A scattering on the camera's first free flight in a stack's liquid: the light tracer's
                         // connections from its photons' vertices there carry everything this path would find.
-                        if (st.lightTracedSegment || merged) {
+                        if (st.entry.inLiquid || merged) {
                             terminated = true;
                             return false;
                         }
-                        st.cameraPrefix = st.mergePrefix = false;
+                        st.entry.open = st.mergePrefix = false;
                         if (beta && r_u) {
                             scatterInMedium(y, med.phase(), med.phase().g(), {});
                             scattered = true;
@@ -1020,31 +1038,10 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             if (chainExpectsHit && transmitted && dot(dir, hit->n) > 0) ++st.chainNext;
             else st.chainShells = -1;
         };
-        // The camera path's way into a stack's liquid (PathState::cameraPrefix): the stack's next interface,
-        // crossed inward by refraction, advances it; leaving the liquid or any other surface event ends it,
-        // except crossing an index-matched interface (the light tracer's transmittance crosses them too).
-        auto advancePrefix = [&](bool inward, bool indexMatched) {
-            if (!st.cameraPrefix) return;
-            if (st.lightTracedSegment) {  // left the liquid without a collision
-                st.cameraPrefix = st.lightTracedSegment = false;
-                return;
-            }
-            int s = st.enterShells;
-            if (s < 0)
-                for (size_t i = 0; i < shells_.size() && s < 0; ++i)
-                    if (shells_[i].shape[static_cast<size_t>(shells_[i].count - 1)] == hit->shape) s = static_cast<int>(i);
-            const SphericalShells* sh = s >= 0 ? &shells_[static_cast<size_t>(s)] : nullptr;
-            if (sh && inward && hit->shape == sh->shape[static_cast<size_t>(sh->count - 1 - st.enterNext)]) {
-                st.enterShells = s;
-                st.lightTracedSegment = ++st.enterNext == sh->count;
-            } else if (!indexMatched) {
-                st.cameraPrefix = false;
-            }
-        };
         if (shape.material == kNone) {
             if (!shape.isInterface) break;  // black emitter or absorber
             if (chainExpectsHit) followChain(true, ray.d);
-            advancePrefix(dot(ray.d, hit->n) < 0, true);
+            st.entry.meet(shells_, hit->shape, dot(ray.d, hit->n) < 0, true);
             medium = mediumAfterCrossing(shape, hit->n, ray.d, medium);
             ray.o = hit->p;
             st.tMin = leavingTMin(hit->n, ray.d, hit->epsilon);
@@ -1061,9 +1058,9 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         const Material& mat = *scene_.materials[static_cast<size_t>(shape.material)];
         // An opaque, non-specular surface seen straight from the camera: the light tracer connects its
         // re-emitted light to the camera, so the whole path's fluorescence is the light tracer's.
-        if (st.cameraPrefix && st.enterShells < 0 && !mat.isSpecular() && !mat.isTransmissive()) {
+        if (st.entry.open && st.entry.stack < 0 && !mat.isSpecular() && !mat.isTransmissive()) {
             st.fluorescenceCovered = true;
-            st.cameraPrefix = false;
+            st.entry.open = false;
         }
         // The same surface seen through a chain of dielectric events: photon merging's (PathStart::mergedSegments).
         if (st.mergePrefix && st.chainEvents >= 1 && !mat.isSpecular() && !mat.isTransmissive()) st.fluorescenceCovered = true;
@@ -1089,7 +1086,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
         if (!bs) break;
         const Vec3 wi = frame.toWorld(bs->wi);
         followChain(bs->transmission && bs->specular, wi);
-        advancePrefix(bs->transmission && bs->specular && dot(wi, hit->n) < 0, false);
+        st.entry.meet(shells_, hit->shape, bs->transmission && bs->specular && dot(wi, hit->n) < 0, false);
         if (st.mergePrefix && !(shape.isInterface && mat.isSpecular() && mat.isTransmissive() && bs->specular &&
                                 ++st.chainEvents <= kMaxMergedChainEvents))
             st.mergePrefix = false;

@@ -148,6 +148,20 @@ struct PathStart {
 // The longest chain of dielectric events before a merged segment (PathStart::mergedSegments).
 inline constexpr int kMaxMergedChainEvents = 8;
 
+// A camera path's way from the camera into the liquid of a stack of shells by refraction alone, whose first
+// free flight there the light tracer's connections carry (PathStart::lightTracedFluorescence). The path
+// tracer and photon merging's chain tracer both track it, so that their partitions of the paths match.
+struct StackEntry {
+    bool open = false;      // still on such a way: no other surface event, no collision yet
+    bool inLiquid = false;  // through every interface of the stack: the connections' free flight
+    int stack = -1;         // the stack entered (-1 before its outermost interface)
+    int crossed = 0;        // its interfaces crossed inward, outermost first
+    // A surface of `shape` met: the stack's next interface crossed inward by refraction advances the way;
+    // leaving the liquid, or any other surface event, ends it, except an index-matched crossing (the light
+    // tracer's transmittance crosses those too).
+    void meet(const std::vector<SphericalShells>& shells, uint32_t shape, bool inward, bool indexMatched);
+};
+
 // How a sub-path started at a branch point weighs its first vertex's connection to a beam's unscattered
 // light where the camera's imaging computes that emission: 0 on the camera path's first segment (the
 // caller computes it), the MIS weight after a connection to the computed emission, 1 otherwise.

@@ -43,30 +43,8 @@ struct Branch {
     Vec3 entryNormal;     // of the last surface crossed or left, on the side the ray goes
     int events = 0;
     std::vector<std::pair<int, double>> crossed;  // (medium, length) of the media passed through
-    // The connections' partition, as PathTracer tracks it (PathState::cameraPrefix).
-    bool cameraPrefix = false, lightTracedSegment = false;
-    int enterShells = -1, enterNext = 0;
+    StackEntry entry;  // the connections' partition, as the camera paths track it
 };
-
-// Mirrors PathTracer's advancePrefix: the chain's way into a stack's liquid by refraction alone.
-void advancePrefix(Branch& b, const std::vector<SphericalShells>& shells, uint32_t shape, bool inward, bool indexMatched) {
-    if (!b.cameraPrefix) return;
-    if (b.lightTracedSegment) {
-        b.cameraPrefix = b.lightTracedSegment = false;
-        return;
-    }
-    int s = b.enterShells;
-    if (s < 0)
-        for (size_t i = 0; i < shells.size() && s < 0; ++i)
-            if (shells[i].shape[static_cast<size_t>(shells[i].count - 1)] == shape) s = static_cast<int>(i);
-    const SphericalShells* sh = s >= 0 ? &shells[static_cast<size_t>(s)] : nullptr;
-    if (sh && inward && shape == sh->shape[static_cast<size_t>(sh->count - 1 - b.enterNext)]) {
-        b.enterShells = s;
-        b.lightTracedSegment = ++b.enterNext == sh->count;
-    } else if (!indexMatched) {
-        b.cameraPrefix = false;
-    }
-}
 
 // The lowest extinction of a medium over the scene's spectral range (at its bins' edges and centres):
 // Russian roulette through a medium survives with e^(-σ_low L), a bound on the transmittance there.
@@ -120,7 +98,7 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                 Branch first;
                 first.ray = cameraRay(cam, x, y, rng.uniform(), rng.uniform());
                 first.medium = cam.medium;
-                first.cameraPrefix = !shells.empty();
+                first.entry.open = !shells.empty();
                 stack.assign(1, first);
                 while (!stack.empty()) {
                     Branch b = stack.back();
@@ -131,7 +109,7 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                         if (b.medium != kNone && !scene.media[static_cast<size_t>(b.medium)].isVacuumLike()) {
                             const Medium& med = scene.media[static_cast<size_t>(b.medium)];
                             if (!med.isHomogeneous() || !hit) break;  // where the camera paths end their chains too
-                            if (!b.lightTracedSegment && b.events >= 1) {
+                            if (!b.entry.inLiquid && b.events >= 1) {
                                 CameraSegment seg;
                                 seg.origin = b.ray.o;
                                 seg.direction = b.ray.d;
@@ -157,7 +135,7 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                         const bool entering = dot(b.ray.d, hit->n) < 0;
                         if (shape.material == kNone) {
                             if (!shape.isInterface) break;
-                            advancePrefix(b, shells, hit->shape, entering, true);
+                            b.entry.meet(shells, hit->shape, entering, true);
                             b.medium = entering ? shape.insideMedium : shape.outsideMedium;
                             b.entryNormal = entering ? -hit->n : hit->n;
                             b.ray.o = hit->p;
@@ -200,7 +178,7 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                             return true;
                         };
                         if (refracts && survives(t)) {
-                            advancePrefix(t, shells, hit->shape, dot(wt, hit->n) < 0, false);
+                            t.entry.meet(shells, hit->shape, dot(wt, hit->n) < 0, false);
                             t.medium = next;
                             t.entryNormal = -nFacing;
                             t.ray = Ray{hit->p, wt};
@@ -208,7 +186,7 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                             stack.push_back(t);
                         }
                         if (!survives(b)) break;
-                        advancePrefix(b, shells, hit->shape, false, false);
+                        b.entry.meet(shells, hit->shape, false, false);
                         const Vec3 dir = normalize(b.ray.d + nFacing * (2 * cosI));
                         b.entryNormal = nFacing;
                         b.ray = Ray{hit->p, dir};
