@@ -108,16 +108,7 @@ private:
             if (!pixel) continue;
             const double dAdw = areaPerSolidAngle(*sh, p, r, camera, r.exitDirection);
             if (!(dAdw > 0)) continue;
-            double T = 1;
-            Vec3 from = p, normal;
-            double eps = 0;
-            for (int i = 0; i <= sh->count && T > 0; ++i) {
-                const Vec3 to = i < sh->count ? r.points[static_cast<size_t>(i)] : camera;
-                T *= tracer_.transmittance(from, to, sh->medium[static_cast<size_t>(i)], wl, rng_, i > 0 ? &normal : nullptr, eps)[0];
-                normal = normalize(to - sh->center);
-                eps = sphereRayEpsilon(to);
-                from = to;
-            }
+            const double T = tracer_.chainTransmittance(*sh, p, r, camera, wl, rng_)[0];
             if (!(T > 0)) continue;
             // The generalized geometry term is 1 / (dA⊥ at the camera per dω at p): the indices of refraction
             // cancel against the radiance's n² (docs/model.md).

@@ -159,6 +159,30 @@ SampledSpectrum PathTracer::transmittance(const Vec3& p0, const Vec3& p1, int me
     return estimateTransmittance(p0, p1, medium, wl, rng, surfaceNormal, surfaceEpsilon, false, true).T;
 }
 
+PathTracer::TransmittanceEstimate PathTracer::estimateChainTransmittance(const SphericalShells& sh, const Vec3& p, const ShellPath& chain,
+                                                                        const Vec3& target, const SampledWavelengths& wl, Rng& rng) const {
+    TransmittanceEstimate T{SampledSpectrum(1.0), SampledSpectrum(1.0), SampledSpectrum(1.0)};
+    Vec3 from = p, normal;
+    double eps = 0;
+    for (int i = 0; i <= sh.count && T.T; ++i) {
+        const Vec3 to = i < sh.count ? chain.points[static_cast<size_t>(i)] : target;
+        const TransmittanceEstimate Ti =
+            estimateTransmittance(from, to, sh.medium[static_cast<size_t>(i)], wl, rng, i > 0 ? &normal : nullptr, eps, false, true);
+        T.T *= Ti.T;
+        T.r_u *= Ti.r_u;
+        T.r_l *= Ti.r_l;
+        normal = normalize(to - sh.center);
+        eps = sphereRayEpsilon(to);
+        from = to;
+    }
+    return T;
+}
+
+SampledSpectrum PathTracer::chainTransmittance(const SphericalShells& sh, const Vec3& p, const ShellPath& chain, const Vec3& target,
+                                               const SampledWavelengths& wl, Rng& rng) const {
+    return estimateChainTransmittance(sh, p, chain, target, wl, rng).T;
+}
+
 SampledSpectrum PathTracer::beamTransmittance(const Vec3& p, const Vec3& towardSource, int medium, const SampledWavelengths& wl,
                                              Rng& rng) const {
     // As next-event estimation connects to a beam (LightSampler): back along the beam beyond the scene,
@@ -768,19 +792,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             if (!(f > 0)) continue;
             const double dAdw = areaPerSolidAngle(sh, p, r, ls->p, area ? ls->n : r.exitDirection);
             if (!(dAdw > 0)) continue;
-            TransmittanceEstimate T{SampledSpectrum(1.0), SampledSpectrum(1.0), SampledSpectrum(1.0)};
-            Vec3 from = p, normal;
-            double eps = 0;
-            for (int i = 0; i <= sh.count && T.T; ++i) {
-                const Vec3 to = i < sh.count ? r.points[static_cast<size_t>(i)] : ls->p;
-                const TransmittanceEstimate Ti = estimateTransmittance(from, to, sh.medium[static_cast<size_t>(i)], wl, rng, i > 0 ? &normal : nullptr, eps, false, true);
-                T.T *= Ti.T;
-                T.r_u *= Ti.r_u;
-                T.r_l *= Ti.r_l;
-                normal = normalize(to - sh.center);
-                eps = sphereRayEpsilon(to);
-                from = to;
-            }
+            const TransmittanceEstimate T = estimateChainTransmittance(sh, p, r, ls->p, wl, rng);
             if (!T.T) continue;
             const double scale = r.fresnel * sqr(sh.ior[0] / sh.ior[static_cast<size_t>(sh.count)]);
             const double pdfChain = pdfArea * dAdw;

@@ -191,6 +191,11 @@ public:
     SampledSpectrum transmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl, Rng& rng,
                                   const Vec3* surfaceNormal = nullptr, double surfaceEpsilon = 0.0) const;
 
+    // Transmittance along a refracted chain through stack `sh` from p (inside its liquid) through the chain's
+    // points to `target` outside it (a light, the camera), as transmittance() gives it segment by segment.
+    SampledSpectrum chainTransmittance(const SphericalShells& sh, const Vec3& p, const ShellPath& chain, const Vec3& target,
+                                       const SampledWavelengths& wl, Rng& rng) const;
+
     // Transmittance from p back along a beam (unit `towardSource`) to where it entered the sample.
     SampledSpectrum beamTransmittance(const Vec3& p, const Vec3& towardSource, int medium, const SampledWavelengths& wl, Rng& rng) const;
 
@@ -213,6 +218,9 @@ private:
     TransmittanceEstimate estimateTransmittance(const Vec3& p0, const Vec3& p1, int medium, const SampledWavelengths& wl, Rng& rng,
                                                 const Vec3* surfaceNormal, double surfaceEpsilon, bool untilRefraction,
                                                 bool residual) const;
+    // chainTransmittance with the path pdf ratios of its null collisions.
+    TransmittanceEstimate estimateChainTransmittance(const SphericalShells& sh, const Vec3& p, const ShellPath& chain, const Vec3& target,
+                                                     const SampledWavelengths& wl, Rng& rng) const;
     // Ratio tracking over [0, length) of r in a grid medium; false once the estimate is zero.
     bool ratioTrack(const Medium& med, const MediumSpectra& spec, const Ray& r, double length, Rng& rng, TransmittanceEstimate& e,
                     bool residual) const;
