@@ -46,17 +46,18 @@ struct Branch {
     StackEntry entry;  // the connections' partition, as the camera paths track it
 };
 
-// The lowest extinction of a medium over the scene's spectral range (at its bins' edges and centres):
-// Russian roulette through a medium survives with e^(-σ_low L), a bound on the transmittance there.
+double extinctionAt(const Medium& m, double lambda) {
+    const MediumSample c = m.coefficients(Vec3(0, 0, 0), SampledWavelengths::atLine(lambda, 1.0));
+    return c.sigmaA[0] + c.sigmaS[0];
+}
+
+// The lowest extinction of a homogeneous medium over the scene's spectral range (at its bins' edges and
+// centres): Russian roulette through a medium survives with e^(-σ_low L), a bound on the transmittance there.
 double lowestExtinction(const Scene& scene, const Medium& m) {
-    ChannelValues ch{};
-    m.channelValues(Vec3(0, 0, 0), ch.data());
     double low = std::numeric_limits<double>::infinity();
     const double step = scene.spectral.binWidth / 2;
-    for (double l = scene.spectral.lambdaMin; l <= scene.spectral.lambdaMax + 1e-9; l += step) {
-        const MediumSample c = m.spectra(SampledWavelengths::atLine(std::min(l, scene.spectral.lambdaMax), 1.0)).at(ch.data());
-        low = std::min(low, c.sigmaA[0] + c.sigmaS[0]);
-    }
+    for (double l = scene.spectral.lambdaMin; l <= scene.spectral.lambdaMax + 1e-9; l += step)
+        low = std::min(low, extinctionAt(m, std::min(l, scene.spectral.lambdaMax)));
     return std::max(0.0, low);
 }
 
@@ -153,7 +154,7 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                                 seg.normal = shape.isInterface ? hit->n : faceForward(hit->n, -b.ray.d);
                                 seg.material = &mat;
                                 seg.eta = scene.ior(shape.insideMedium) / scene.ior(shape.outsideMedium);
-                                seg.medium = static_cast<int>(hit->shape);  // the shape, for surfaces
+                                seg.shape = hit->shape;
                                 store(seg, b, 1.0);
                             }
                             break;
@@ -318,7 +319,7 @@ void CameraSegments::gatherOnSurface(const Photon& ph, const SurfaceHit& hit, co
     const double photonsPerSegment = photonsPerSample * samples_;
     for (uint32_t k = cellStart_[static_cast<size_t>(c)]; k < cellStart_[static_cast<size_t>(c) + 1]; ++k) {
         const CameraSegment& s = segments_[cellSegments_[k]];
-        if (!s.surface || s.medium != static_cast<int>(hit.shape) || dot(s.normal, n) < 0.99) continue;
+        if (!s.surface || s.shape != hit.shape || dot(s.normal, n) < 0.99) continue;
         const Vec3 v = hit.p - s.origin;
         if (dot(v, v) > s.radius * s.radius) continue;
         ++merges;
@@ -335,11 +336,7 @@ void CameraSegments::gatherOnSurface(const Photon& ph, const SurfaceHit& hit, co
 double CameraSegments::extinction(int medium, double lambda) const {
     if (medium == kNone) return 0;
     const Medium& m = scene_.media[static_cast<size_t>(medium)];
-    if (m.isVacuumLike()) return 0;
-    ChannelValues ch{};
-    m.channelValues(Vec3(0, 0, 0), ch.data());
-    const MediumSample c = m.spectra(SampledWavelengths::atLine(lambda, 1.0)).at(ch.data());
-    return c.sigmaA[0] + c.sigmaS[0];
+    return m.isVacuumLike() ? 0 : extinctionAt(m, lambda);
 }
 
 }  // namespace fluorosim

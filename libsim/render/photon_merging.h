@@ -16,8 +16,8 @@
 // RenderSettings::mergeRadiusPixels, reduced with the sample index as in progressive photon mapping
 // (r² ∝ s^(α-1), α = 2/3), so the blur it adds vanishes as samples grow. The camera paths leave exactly
 // these segments out (PathStart::mergedSegments); docs/model.md, "Photon merging behind glass".
-#include <cmath>
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -33,7 +33,9 @@ namespace fluorosim {
 // there carry (photon mapping on surfaces, fluorescence only).
 struct CameraSegment {
     bool surface = false;
-    Vec3 normal;  // surface: the shading side the chain arrives on
+    // Surface points: the shape, the normal on the side the chain arrives on, its material and eta.
+    uint32_t shape = 0;
+    Vec3 normal;
     const Material* material = nullptr;
     double eta = 1;
     Vec3 origin, direction;  // unit direction, away from the camera
@@ -41,8 +43,8 @@ struct CameraSegment {
     double cosDepth = 1;     // dot(direction, depthAxis)
     double length = 0;
     double radius = 0;
-    double weight = 0;  // the chain's branch weight over n² of the medium, over π r²
-    int medium = kNone;
+    double weight = 0;  // the chain's branch weight (with its radiance scaling, (n_camera / n_medium)²) over π r² cosDepth
+    int medium = kNone;  // segments
     int32_t x = 0, y = 0;  // the pixel
     uint32_t prefixBegin = 0, prefixCount = 0;  // the media crossed before it (CameraSegments::Crossing)
     // The part of the kernel disc inside the medium, at depths t = 0, step, 2 step, ... along the segment

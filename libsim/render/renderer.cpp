@@ -150,7 +150,7 @@ RenderSummary render(const Scene& scene, Film& film, const RenderOptions& option
                 summary.cancelled = true;
                 break;
             }
-            if (segments && !batchStats.empty()) batchStats[0].mergedSegments += segments->size();
+            if (segments) summary.light.mergedSegments += segments->size();
         }
         for (int y = 0; y < rows; ++y) film.commit(staged[static_cast<size_t>(y)]);
         for (size_t b = 0; b < splats.size(); ++b) {
