@@ -362,7 +362,7 @@ PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths&
     state.field = start.field;
     state.tMin = start.tMin;
     state.firstSegment = true;
-    state.entry.open = start.lightTracedFluorescence && !shells_.empty();
+    state.entry.open = start.lightTracedFluorescence;
     state.mergePrefix = start.mergedSegments;
     state.prevScatter = ray.o;
     return trace(state, wl, rng, stats);

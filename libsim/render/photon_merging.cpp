@@ -31,6 +31,10 @@ constexpr int kInsideDepths = 8;
 constexpr double kMinInside = 0.25;
 // A surface the disc meets counts as the medium's side where its normal is this far from the disc's.
 constexpr double kSideCos = 0.7071;
+// The entry surface's curvature around a segment's entry point: its depth below the disc's plane, probed by
+// kCurvatureProbes rays along the disc's normal at the kernel's radius, at angles π k / kCurvatureProbes (a
+// quadratic form is even: the opposite half circle repeats them).
+constexpr int kCurvatureProbes = 4;
 // The grid has at most this many cells along an axis.
 constexpr int kMaxCellsPerAxis = 128;
 
@@ -41,6 +45,7 @@ struct Branch {
     double weight = 1;
     double distance = 0;  // from the camera along the chain
     Vec3 entryNormal;     // of the last surface crossed or left, on the side the ray goes
+    uint32_t entryShape = 0;
     int events = 0;
     std::vector<std::pair<int, double>> crossed;  // (medium, length) of the media passed through
     StackEntry entry;  // the connections' partition, as the camera paths track it
@@ -59,6 +64,37 @@ double lowestExtinction(const Scene& scene, const Medium& m) {
     for (double l = scene.spectral.lambdaMin; l <= scene.spectral.lambdaMax + 1e-9; l += step)
         low = std::min(low, extinctionAt(m, std::min(l, scene.spectral.lambdaMax)));
     return std::max(0.0, low);
+}
+
+// The depth of a segment's entry surface below its disc's plane, as a quadratic form a u² + 2 b u v + c v² of
+// the offset (u, v) in the disc's frame, fitted to kCurvatureProbes probes at the kernel's radius (a Fourier
+// fit: mean, cos 2φ and sin 2φ), stored as the symmetric matrix of that form in world coordinates. A probe
+// that finds no surface within the radius leaves the surface flat: the disc then follows nothing.
+void probeCurvature(const Scene& scene, const Frame& disc, CameraSegment& s) {
+    double m0 = 0, mc = 0, ms = 0;
+    for (int k = 0; k < kCurvatureProbes; ++k) {
+        const double phi = kPi * k / kCurvatureProbes;
+        const Vec3 q = s.origin + disc.toWorld(Vec3(std::cos(phi), std::sin(phi), 0)) * s.radius;
+        Ray probe{q - s.depthAxis * s.radius, s.depthAxis};
+        double h = std::numeric_limits<double>::quiet_NaN(), travelled = 0;
+        for (int hits = 0; hits < 4 && std::isnan(h); ++hits) {
+            const auto hit = scene.geometry.intersect(probe, 0, 2 * s.radius - travelled);
+            if (!hit) break;
+            travelled += hit->t;
+            if (hit->shape == s.entryShape) h = travelled - s.radius;
+            probe = Ray{hit->p + s.depthAxis * hit->epsilon, s.depthAxis};
+        }
+        if (std::isnan(h)) return;
+        const double scaled = h / sqr(s.radius);
+        m0 += scaled / kCurvatureProbes;
+        mc += 2 * scaled * std::cos(2 * phi) / kCurvatureProbes;
+        ms += 2 * scaled * std::sin(2 * phi) / kCurvatureProbes;
+    }
+    const double a = m0 + mc, b = ms, c = m0 - mc;
+    const Vec3 &u = disc.s, &v = disc.t;
+    const auto entry = [&](int i, int j) { return a * u[i] * u[j] + b * (u[i] * v[j] + v[i] * u[j]) + c * v[i] * v[j]; };
+    s.curvature = {entry(0, 0), entry(1, 1), entry(2, 2), entry(0, 1), entry(0, 2), entry(1, 2)};
+    s.curved = a != 0 || b != 0 || c != 0;
 }
 
 }  // namespace
@@ -99,7 +135,7 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                 Branch first;
                 first.ray = cameraRay(cam, x, y, rng.uniform(), rng.uniform());
                 first.medium = cam.medium;
-                first.entry.open = !shells.empty();
+                first.entry.open = true;
                 stack.assign(1, first);
                 while (!stack.empty()) {
                     Branch b = stack.back();
@@ -117,9 +153,11 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                                 seg.length = hit->t;
                                 seg.cosDepth = dot(b.ray.d, b.entryNormal);
                                 seg.depthAxis = b.entryNormal;
+                                seg.entryShape = b.entryShape;
                                 if (!(seg.cosDepth >= kMinCosDepth)) {
                                     seg.depthAxis = b.ray.d;
                                     seg.cosDepth = 1;
+                                    seg.entryShape = kNoEntryShape;
                                 }
                                 seg.medium = b.medium;
                                 store(seg, b, seg.cosDepth);
@@ -139,6 +177,7 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                             b.entry.meet(shells, hit->shape, entering, true);
                             b.medium = entering ? shape.insideMedium : shape.outsideMedium;
                             b.entryNormal = entering ? -hit->n : hit->n;
+                            b.entryShape = hit->shape;
                             b.ray.o = hit->p;
                             b.tMin = hit->epsilon / std::max(std::abs(dot(hit->n, b.ray.d)), 1e-2);
                             continue;
@@ -182,6 +221,7 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                             t.entry.meet(shells, hit->shape, dot(wt, hit->n) < 0, false);
                             t.medium = next;
                             t.entryNormal = -nFacing;
+                            t.entryShape = hit->shape;
                             t.ray = Ray{hit->p, wt};
                             t.tMin = hit->epsilon / std::max(std::abs(dot(hit->n, wt)), 1e-2);
                             stack.push_back(t);
@@ -190,6 +230,7 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                         b.entry.meet(shells, hit->shape, false, false);
                         const Vec3 dir = normalize(b.ray.d + nFacing * (2 * cosI));
                         b.entryNormal = nFacing;
+                        b.entryShape = hit->shape;
                         b.ray = Ray{hit->p, dir};
                         b.tMin = hit->epsilon / std::max(std::abs(dot(hit->n, dir)), 1e-2);
                     }
@@ -220,9 +261,10 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                 fractions[i][0] = 1;
                 continue;
             }
+            const Frame disc = Frame::fromNormal(s.depthAxis);
+            if (s.entryShape != kNoEntryShape) probeCurvature(scene, disc, s);
             s.insideStep = std::max(s.radius / 2, s.length / kInsideDepths);
             s.insideCount = static_cast<uint32_t>(std::min<double>(kInsideDepths, std::floor(s.length / s.insideStep) + 1));
-            const Frame disc = Frame::fromNormal(s.depthAxis);
             for (uint32_t j = 0; j < s.insideCount; ++j) {
                 // The disc's centre, nudged off the entry surface.
                 const Vec3 c = s.origin + s.direction * std::max(j * s.insideStep, 1e-3 * s.radius);

@@ -17,6 +17,7 @@
 // (r² ∝ s^(α-1), α = 2/3), so the blur it adds vanishes as samples grow. The camera paths leave exactly
 // these segments out (PathStart::mergedSegments); docs/model.md, "Photon merging behind glass".
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -27,6 +28,8 @@
 #include "scene/scene.h"
 
 namespace fluorosim {
+
+inline constexpr uint32_t kNoEntryShape = 0xffffffffu;
 
 // One straight piece of a camera ray's chain inside a homogeneous, non-vacuum medium, or (surface) the
 // opaque, non-specular surface point where a chain ends, whose re-emitted light the photons that land
@@ -41,6 +44,13 @@ struct CameraSegment {
     Vec3 origin, direction;  // unit direction, away from the camera
     Vec3 depthAxis;          // the kernel disc's normal: the entry surface's, into the medium (or the direction)
     double cosDepth = 1;     // dot(direction, depthAxis)
+    // The entry surface (entryShape) curving below the disc's plane: its depth there at an offset w along the
+    // disc is wᵀ C w, C symmetric (xx, yy, zz, xy, xz, yz). Depths are measured from it, so the kernel follows
+    // the surface: under a convex one a flat disc would reach out of the medium, and read light from nearer
+    // the surface than the ray's depth.
+    uint32_t entryShape = kNoEntryShape;  // none where the disc lies across the ray
+    bool curved = false;
+    std::array<double, 6> curvature{};
     double length = 0;
     double radius = 0;
     double weight = 0;  // the chain's branch weight (with its radiance scaling, (n_camera / n_medium)²) over π r² cosDepth
@@ -107,9 +117,18 @@ void CameraSegments::gather(const Photon& ph, const Vec3& p, Phase&& phase, doub
         if (s.surface || s.medium != ph.medium) continue;
         // The point of the ray at p's depth, and p's distance from it along the disc.
         const Vec3 v = p - s.origin;
-        const double t = dot(v, s.depthAxis) / s.cosDepth;
-        if (!(t >= 0 && t <= s.length)) continue;
+        const double depth = dot(v, s.depthAxis);
+        double t = depth / s.cosDepth;
+        // p's offset along the disc: v less its part along the ray (oblique to the disc unless cosDepth is 1).
         const Vec3 w = v - s.direction * t;
+        // Under a curved entry surface, p's depth below the surface at that offset: the kernel is the disc
+        // sheared along the ray onto the surface's parallel, still of volume π r² cosDepth per unit t.
+        if (s.curved) {
+            const auto& C = s.curvature;
+            t -= (C[0] * w.x * w.x + C[1] * w.y * w.y + C[2] * w.z * w.z + 2 * (C[3] * w.x * w.y + C[4] * w.x * w.z + C[5] * w.y * w.z)) /
+                 s.cosDepth;
+        }
+        if (!(t >= 0 && t <= s.length)) continue;
         if (dot(w, w) > s.radius * s.radius) continue;
         ++merges;
         const double f = phase(-s.direction);
