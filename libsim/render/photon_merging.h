@@ -88,6 +88,13 @@ private:
         int medium;
         double length;
     };
+    // What a photon's vertex reads first of each candidate segment, in one cache line: the lateral test
+    // rejects most of them (single precision: offsets of a kernel's size are far above its rounding).
+    struct Reach {
+        float origin[3], direction[3], axis[3];
+        float invCosDepth, radius2;
+        int32_t medium;  // kNone for surface points
+    };
     // σt of a homogeneous medium at a wavelength (0 for none or vacuum-like).
     double extinction(int medium, double lambda) const;
     double prefixOpticalDepth(const CameraSegment& s, double lambda) const;
@@ -96,6 +103,7 @@ private:
     const Scene& scene_;
     double samples_;  // per pixel in the pass
     std::vector<CameraSegment> segments_;
+    std::vector<Reach> reach_;  // one per segment
     std::vector<Crossing> crossings_;
     std::vector<float> inside_;
     // A uniform grid over the segments' reach: cellStart_[c]..cellStart_[c+1] in cellSegments_.
@@ -113,14 +121,15 @@ void CameraSegments::gather(const Photon& ph, const Vec3& p, Phase&& phase, doub
     const double photonsPerSegment = photonsPerSample * samples_;
     double sigmaT = -1;
     for (uint32_t k = cellStart_[static_cast<size_t>(c)]; k < cellStart_[static_cast<size_t>(c) + 1]; ++k) {
+        const Reach& r = reach_[cellSegments_[k]];
+        if (r.medium != ph.medium) continue;
+        // The point of the ray at p's depth, and p's offset from it along the disc: v less its part along the
+        // ray (oblique to the disc unless cosDepth is 1).
+        const Vec3 v(p.x - r.origin[0], p.y - r.origin[1], p.z - r.origin[2]);
+        double t = (v.x * r.axis[0] + v.y * r.axis[1] + v.z * r.axis[2]) * r.invCosDepth;
+        const Vec3 w(v.x - r.direction[0] * t, v.y - r.direction[1] * t, v.z - r.direction[2] * t);
+        if (dot(w, w) > r.radius2) continue;
         const CameraSegment& s = segments_[cellSegments_[k]];
-        if (s.surface || s.medium != ph.medium) continue;
-        // The point of the ray at p's depth, and p's distance from it along the disc.
-        const Vec3 v = p - s.origin;
-        const double depth = dot(v, s.depthAxis);
-        double t = depth / s.cosDepth;
-        // p's offset along the disc: v less its part along the ray (oblique to the disc unless cosDepth is 1).
-        const Vec3 w = v - s.direction * t;
         // Under a curved entry surface, p's depth below the surface at that offset: the kernel is the disc
         // sheared along the ray onto the surface's parallel, still of volume π r² cosDepth per unit t.
         if (s.curved) {
@@ -129,7 +138,6 @@ void CameraSegments::gather(const Photon& ph, const Vec3& p, Phase&& phase, doub
                  s.cosDepth;
         }
         if (!(t >= 0 && t <= s.length)) continue;
-        if (dot(w, w) > s.radius * s.radius) continue;
         ++merges;
         const double f = phase(-s.direction);
         if (!(f > 0)) continue;
