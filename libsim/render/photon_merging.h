@@ -141,7 +141,7 @@ void CameraSegments::gather(const Photon& ph, const Vec3& p, Phase&& phase, doub
         ++merges;
         const double f = phase(-s.direction);
         if (!(f > 0)) continue;
-        if (sigmaT < 0) sigmaT = extinction(ph.medium, ph.lambda);
+        if (sigmaT < 0) sigmaT = ph.sigmaT >= 0 ? ph.sigmaT : extinction(ph.medium, ph.lambda);
         const double opticalDepth = sigmaT * t + prefixOpticalDepth(s, ph.lambda);
         const uint32_t j = std::min(s.insideCount - 1, static_cast<uint32_t>(t / s.insideStep + 0.5));
         const double value = ph.weight * f * std::exp(-opticalDepth) * s.weight / (photonsPerSegment * inside_[s.insideBegin + j]);

@@ -93,13 +93,21 @@ double sampleLightWavelength(const Spectrum& s, double lambdaMin, double lambdaM
 }
 
 void walkPhoton(const Scene& scene, Photon ph, Rng& rng, PhotonEvents& events, bool scatterAtSurfaces) {
+    // The medium's spectra at the photon's wavelength, looked up again only when either changes.
+    const Medium* spectraOf = nullptr;
+    double spectraAt = -1;
+    MediumSpectra spec;
     for (int step = 0; step < 100000000; ++step) {
         const auto hit = scene.geometry.intersect(ph.ray, ph.tMin, std::numeric_limits<double>::infinity());
         ph.tMin = 0;
         if (ph.medium != kNone) {
             const Medium& m = scene.media[static_cast<size_t>(ph.medium)];
             // Analog delta tracking at the photon's one wavelength (exact sampling in a homogeneous medium).
-            const MediumSpectra spec = m.spectra(SampledWavelengths::atLine(ph.lambda, 1.0));
+            if (&m != spectraOf || ph.lambda != spectraAt) {
+                spec = m.spectra(SampledWavelengths::atLine(ph.lambda, 1.0));
+                spectraOf = &m;
+                spectraAt = ph.lambda;
+            }
             const double tHit = hit ? hit->t : std::numeric_limits<double>::infinity();
             ChannelValues ch{};
             double s = std::numeric_limits<double>::infinity();
@@ -119,7 +127,9 @@ void walkPhoton(const Scene& scene, Photon ph, Rng& rng, PhotonEvents& events, b
                 const double sa = c.sigmaA[0], ss = c.sigmaS[0], st = sa + ss;
                 const Vec3 p = ph.ray.at(s);
                 if (rng.uniform() * st < ss) {
+                    ph.sigmaT = st;
                     events.scattered(ph, p);
+                    ph.sigmaT = -1;
                     double pdf = 0;
                     ph.ray = Ray{p, m.phase().sample(ph.ray.d, rng.uniform(), rng.uniform(), &pdf)};
                     continue;

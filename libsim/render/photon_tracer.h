@@ -48,6 +48,7 @@ struct Photon {
     double weight = 0;
     bool fluorescent = false;  // re-emitted at least once
     double tMin = 0;           // > 0 when the ray starts on the surface it leaves
+    double sigmaT = -1;        // at a scattering: the extinction there at lambda (-1 elsewhere)
 };
 
 // What a photon's walk meets, in order. The default handlers ignore everything.
