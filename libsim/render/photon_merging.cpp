@@ -97,7 +97,6 @@ void probeCurvature(const Scene& scene, const Frame& disc, CameraSegment& s) {
     const Vec3 &u = disc.s, &v = disc.t;
     const auto entry = [&](int i, int j) { return a * u[i] * u[j] + b * (u[i] * v[j] + v[i] * u[j]) + c * v[i] * v[j]; };
     s.curvature = {entry(0, 0), entry(1, 1), entry(2, 2), entry(0, 1), entry(0, 2), entry(1, 2)};
-    s.curved = a != 0 || b != 0 || c != 0;
 }
 
 }  // namespace

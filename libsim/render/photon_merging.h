@@ -49,8 +49,7 @@ struct CameraSegment {
     // the surface: under a convex one a flat disc would reach out of the medium, and read light from nearer
     // the surface than the ray's depth.
     uint32_t entryShape = kNoEntryShape;  // none where the disc lies across the ray
-    bool curved = false;
-    std::array<double, 6> curvature{};
+    std::array<double, 6> curvature{};    // zero: flat
     double length = 0;
     double radius = 0;
     double weight = 0;  // the chain's branch weight (with its radiance scaling, (n_camera / n_medium)²) over π r² cosDepth
@@ -132,11 +131,8 @@ void CameraSegments::gather(const Photon& ph, const Vec3& p, Phase&& phase, doub
         const CameraSegment& s = segments_[cellSegments_[k]];
         // Under a curved entry surface, p's depth below the surface at that offset: the kernel is the disc
         // sheared along the ray onto the surface's parallel, still of volume π r² cosDepth per unit t.
-        if (s.curved) {
-            const auto& C = s.curvature;
-            t -= (C[0] * w.x * w.x + C[1] * w.y * w.y + C[2] * w.z * w.z + 2 * (C[3] * w.x * w.y + C[4] * w.x * w.z + C[5] * w.y * w.z)) /
-                 s.cosDepth;
-        }
+        const auto& C = s.curvature;
+        t -= (C[0] * w.x * w.x + C[1] * w.y * w.y + C[2] * w.z * w.z + 2 * (C[3] * w.x * w.y + C[4] * w.x * w.z + C[5] * w.y * w.z)) / s.cosDepth;
         if (!(t >= 0 && t <= s.length)) continue;
         ++merges;
         const double f = phase(-s.direction);

@@ -35,8 +35,8 @@ struct SphereScene {
     bool box = false;        // the liquid and the glass are boxes (triangle meshes, as the vials), not spheres
     double dyeMolar = 20e-6;  // AF488 in the liquid
     bool spot = false;        // with lampRadius 0: a spot light aimed at the sphere, whose full cone holds all of it
-    bool bareLiquid = false;
-    bool bareGlass = false;   // the same for the glass's outer boundary  // the liquid's boundary has no material: crossed without refraction, as the vials' liquid mesh
+    bool bareLiquid = false;  // the liquid's boundary has no material: crossed without refraction, as the vials' liquid mesh
+    bool bareGlass = false;   // the same for the glass's outer boundary
     double mergeRadiusPixels = 1;
     Integrator integrator = Integrator::Light;
 };
