@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Monte Carlo error of the fluorescent layer of a paper scene (samples/fluorescence), per integrator.
 
-Renders the scene twice (seeds 1 and 2) with each integrator and budget given, through the Python
+Renders the scene twice (seeds 1 and 2, or the pair given by --seeds A,B) with each integrator and budget given, through the Python
 module, and prints one JSON line per render pair: the relative RMS error of the fluorescent layer
 over the pixels of the dyed liquid, estimated from the two seeds (per-pixel variance of one render =
 half the squared difference), divided by the mean fluorescent value there, and the seconds per render.
@@ -12,7 +12,7 @@ those whose central ray meets the vertical cylinder around the glass mesh that h
 (the mesh's x-z radius and y range, translated as the scene places it).
 With --whole: the whole image's total (elastic + fluorescent) RGB instead, for scenes without dyes.
 
-Usage: PYTHONPATH=build/python scripts/paper-scene-error.py [--whole] SCENE.json path:40 mnee:4 light:32 light:32:0 ...
+Usage: PYTHONPATH=build/python scripts/paper-scene-error.py [--whole] [--seeds A,B] SCENE.json path:40 mnee:4 light:32 light:32:0 ...
 (light:SPP:R sets render.merge_radius_pixels to R; 0 turns photon merging off)
 """
 import json
@@ -75,9 +75,16 @@ def fluorescent(result):
 
 def main():
     args = sys.argv[1:]
-    whole = args[0] == "--whole"
+    whole = "--whole" in args
     if whole:
-        args = args[1:]
+        args.remove("--whole")
+    seeds = (1, 2)
+    if "--seeds" in args:
+        i = args.index("--seeds")
+        seeds = tuple(int(v) for v in args[i + 1].split(","))
+        if len(seeds) != 2:
+            sys.exit(f"paper-scene-error.py: --seeds takes two seeds A,B, got {args[i + 1]!r}")
+        del args[i:i + 2]
     path = args[0]
     with open(path) as f:
         scene = json.load(f)
@@ -94,12 +101,12 @@ def main():
         scene["render"].pop("merge_radius_pixels", None)
         if radius:
             scene["render"]["merge_radius_pixels"] = float(radius[0])
-        runs = [fluorosim.render(scene, spp=int(spp), seed=seed, base=base) for seed in (1, 2)]
+        runs = [fluorosim.render(scene, spp=int(spp), seed=seed, base=base) for seed in seeds]
         a, b = layer(runs[0])[mask], layer(runs[1])[mask]
         mean = 0.5 * (a.mean() + b.mean())
         rms = math.sqrt(np.mean((a - b) ** 2) / 2) / mean if mean > 0 else float("nan")
         seconds = 0.5 * (runs[0]["seconds"] + runs[1]["seconds"])
-        print(json.dumps({"scene": path, "integrator": integrator, "spp": int(spp), **({"merge_radius_pixels": float(radius[0])} if radius else {}),
+        print(json.dumps({"scene": path, "integrator": integrator, "spp": int(spp), "seeds": list(seeds), **({"merge_radius_pixels": float(radius[0])} if radius else {}),
                           "pixels": int(mask.sum()),
                           "layer": "total" if whole else "fluorescent", "mean": float(mean), "relative_rms_error": rms, "seconds_per_render": seconds,
                           "relative_mse_x_seconds": rms * rms * seconds}), flush=True)

@@ -145,8 +145,11 @@ struct PathStart {
     bool mergedSegments = false;
 };
 
-// The longest chain of dielectric events before a merged segment (PathStart::mergedSegments).
-inline constexpr int kMaxMergedChainEvents = 8;
+// The longest chain of dielectric events before a merged segment (PathStart::mergedSegments). Long, because a
+// glass plate guides light by total internal reflection: a vial's 2 mm base or cap takes a camera ray across
+// in tens of events, and the light of a longer chain is left to the camera path, which finds it only by
+// chance (at 8, such paths were the vials' heaviest samples).
+inline constexpr int kMaxMergedChainEvents = 64;
 
 // A camera path's way from the camera into the liquid of a stack of shells by refraction alone, whose first
 // free flight there the light tracer's connections carry (PathStart::lightTracedFluorescence). The path

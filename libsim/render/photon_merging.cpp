@@ -25,7 +25,8 @@ constexpr double kAlpha = 2.0 / 3.0;
 constexpr double kMinCosDepth = 0.25;
 // The part of a kernel disc inside the medium: measured by kInsideRays rays along the disc from its centre, at
 // most kInsideDepths depths a half radius apart along the segment, and never taken below kMinInside (a disc
-// whose centre hugs an edge).
+// whose centre hugs an edge). The nearest side's strip (CameraSegments::Inside) is kept only where it is at
+// least kMinInside of the disc; closer to the side the kernel is the cut disc, divided by its part inside.
 constexpr int kInsideRays = 8;
 constexpr int kInsideDepths = 8;
 constexpr double kMinInside = 0.25;
@@ -72,21 +73,27 @@ double lowestExtinction(const Scene& scene, const Medium& m) {
 // The depth of a segment's entry surface below its disc's plane, as a quadratic form a u² + 2 b u v + c v² of
 // the offset (u, v) in the disc's frame, fitted to kCurvatureProbes probes at the kernel's radius (a Fourier
 // fit: mean, cos 2φ and sin 2φ), stored as the symmetric matrix of that form in world coordinates. A probe
-// that finds no surface within the radius leaves the surface flat: the disc then follows nothing.
+// that finds no surface within the radius (past an edge of it, as at a vial's top) is taken on the opposite
+// side, where an even form has the same depth; if neither finds it, the surface is left flat.
 void probeCurvature(const Scene& scene, const Frame& disc, CameraSegment& s) {
-    double m0 = 0, mc = 0, ms = 0;
-    for (int k = 0; k < kCurvatureProbes; ++k) {
-        const double phi = kPi * k / kCurvatureProbes;
+    const auto depthAt = [&](double phi) {
         const Vec3 q = s.origin + disc.toWorld(Vec3(std::cos(phi), std::sin(phi), 0)) * s.radius;
         Ray probe{q - s.depthAxis * s.radius, s.depthAxis};
-        double h = std::numeric_limits<double>::quiet_NaN(), travelled = 0;
-        for (int hits = 0; hits < 4 && std::isnan(h); ++hits) {
+        double travelled = 0;
+        for (int hits = 0; hits < 4; ++hits) {
             const auto hit = scene.geometry.intersect(probe, 0, 2 * s.radius - travelled);
             if (!hit) break;
             travelled += hit->t;
-            if (hit->shape == s.entryShape) h = travelled - s.radius;
+            if (hit->shape == s.entryShape) return travelled - s.radius;
             probe = Ray{hit->p + s.depthAxis * hit->epsilon, s.depthAxis};
         }
+        return std::numeric_limits<double>::quiet_NaN();
+    };
+    double m0 = 0, mc = 0, ms = 0;
+    for (int k = 0; k < kCurvatureProbes; ++k) {
+        const double phi = kPi * k / kCurvatureProbes;
+        double h = depthAt(phi);
+        if (std::isnan(h)) h = depthAt(phi + kPi);
         if (std::isnan(h)) return;
         const double scaled = h / sqr(s.radius);
         m0 += scaled / kCurvatureProbes;
@@ -250,17 +257,18 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
     }
     if (segments_.empty()) return;
 
-    // The kernel discs' parts inside their media, by rays from each disc's centre along it: a star-shaped
-    // region's area is ½∫ min(d(φ), r)² dφ. Consistent either way (the part tends to 1 as r does); this
-    // takes out the first-order loss at a box's or a vial's edges (docs/model.md).
-    std::vector<std::array<float, kInsideDepths>> fractions(segments_.size());
+    // The kernel discs' cuts by their media's sides, by rays from each disc's centre along it: the nearest
+    // side's symmetric strip, or (close to a side) the cut disc over its part inside, a star-shaped region
+    // of area ½∫ min(d(φ), r)² dφ. Consistent either way (both tend to the disc as r shrinks); they take out
+    // the loss at a box's or a vial's edges, the strip also its first order in the light's gradient (docs/model.md).
+    std::vector<std::array<Inside, kInsideDepths>> fractions(segments_.size());
     constexpr size_t kChunk = 256;
     threads.parallelFor((segments_.size() + kChunk - 1) / kChunk, [&](size_t chunk) {
         for (size_t i = chunk * kChunk; i < std::min(segments_.size(), (chunk + 1) * kChunk); ++i) {
             CameraSegment& s = segments_[i];
             if (s.surface) {
                 s.insideCount = 1;
-                fractions[i][0] = 1;
+                fractions[i][0] = Inside{1, {0, 0, 0}};
                 continue;
             }
             const Frame disc = Frame::fromNormal(s.depthAxis);
@@ -270,17 +278,41 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
             for (uint32_t j = 0; j < s.insideCount; ++j) {
                 // The disc's centre, nudged off the entry surface.
                 const Vec3 c = s.origin + s.direction * std::max(j * s.insideStep, 1e-3 * s.radius);
-                double sum = 0;
+                // Each ray's reach inside, in radii; the nearest side's in-disc normal m and distance d.
+                std::array<double, kInsideRays> reach;
+                std::array<Vec3, kInsideRays> along;
+                double d = 1;
+                Vec3 m;
                 for (int k = 0; k < kInsideRays; ++k) {
                     const double phi = 2 * kPi * (k + 0.5) / kInsideRays;
-                    const Vec3 w = disc.toWorld(Vec3(std::cos(phi), std::sin(phi), 0));
+                    along[k] = disc.toWorld(Vec3(std::cos(phi), std::sin(phi), 0));
                     // Only the medium's sides cut the disc: where the entry surface itself curves away (a
                     // sphere), the light follows the surface, and the disc's far part is no loss.
-                    const auto hit = scene.geometry.intersect(Ray{c, w}, 0, s.radius);
+                    const auto hit = scene.geometry.intersect(Ray{c, along[k]}, 0, s.radius);
                     const bool side = hit && std::abs(dot(hit->n, s.depthAxis)) < kSideCos;
-                    sum += sqr((side ? hit->t : s.radius) / s.radius);
+                    reach[k] = side ? hit->t / s.radius : 1.0;
+                    if (!side) continue;
+                    Vec3 normal = hit->n - s.depthAxis * dot(hit->n, s.depthAxis);
+                    normal = normalize(dot(normal, along[k]) < 0 ? -normal : normal);
+                    if (const double dk = reach[k] * dot(along[k], normal); dk < d) d = dk, m = normal;
                 }
-                fractions[i][j] = static_cast<float>(std::max(kMinInside, sum / kInsideRays));
+                // The strip |w·m| < d against the disc: its area over π r² in closed form, less what the other
+                // rays (a corner's second side), mirrored through the centre, find cut off beyond it.
+                const double strip = d < 1 ? 2 / kPi * (std::asin(d) + d * std::sqrt(1 - d * d)) : 1.0;
+                double cutDisc = 0, stripRays = 0, symmetricRays = 0;
+                for (int k = 0; k < kInsideRays; ++k) {
+                    cutDisc += sqr(reach[k]) / kInsideRays;
+                    const double edge = d < 1 ? std::min(1.0, d / std::max(1e-12, std::abs(dot(along[k], m)))) : 1.0;
+                    stripRays += sqr(edge);
+                    symmetricRays += sqr(std::min({edge, reach[k], reach[(k + kInsideRays / 2) % kInsideRays]}));
+                }
+                const double symmetric = strip * symmetricRays / stripRays;
+                if (d < 1 && symmetric >= kMinInside) {
+                    const Vec3 cut = m / (d * s.radius);
+                    fractions[i][j] = Inside{static_cast<float>(symmetric), {static_cast<float>(cut.x), static_cast<float>(cut.y), static_cast<float>(cut.z)}};
+                } else {
+                    fractions[i][j] = Inside{static_cast<float>(std::max(kMinInside, cutDisc)), {0, 0, 0}};
+                }
             }
         }
     });

@@ -10,8 +10,9 @@
 // own wavelength, and a disc kernel of radius r that lies parallel to the surface the segment entered by,
 // not across the ray: the light near a boundary varies fast with depth, and a disc across an oblique ray
 // would average it over depths, and reach outside the medium where there are no photons. Where the disc
-// still reaches past the medium's sides (near an edge of a box or a vial), it is divided by the part of its
-// area inside, measured by rays along it (a surface curving away from the disc, as a sphere's, is not a
+// still reaches past the medium's sides (near an edge of a box or a vial), it keeps the strip along the
+// nearest side that is symmetric about its centre, or (closer to the side) it is divided by the part of its
+// area inside, both measured by rays along it (a surface curving away from the disc, as a sphere's, is not a
 // side: the light follows it). r is the pixel's footprint at the segment times
 // RenderSettings::mergeRadiusPixels, reduced with the sample index as in progressive photon mapping
 // (r² ∝ s^(α-1), α = 2/3), so the blur it adds vanishes as samples grow. The camera paths leave exactly
@@ -56,8 +57,8 @@ struct CameraSegment {
     int medium = kNone;  // segments
     int32_t x = 0, y = 0;  // the pixel
     uint32_t prefixBegin = 0, prefixCount = 0;  // the media crossed before it (CameraSegments::Crossing)
-    // The part of the kernel disc inside the medium, at depths t = 0, step, 2 step, ... along the segment
-    // (CameraSegments::inside_), beyond the last the last.
+    // The kernel disc's cut by the medium's sides and the part of it inside the medium, at depths t = 0, step,
+    // 2 step, ... along the segment (CameraSegments::inside_), beyond the last the last.
     uint32_t insideBegin = 0, insideCount = 0;
     double insideStep = 1;
 };
@@ -104,7 +105,16 @@ private:
     std::vector<CameraSegment> segments_;
     std::vector<Reach> reach_;  // one per segment
     std::vector<Crossing> crossings_;
-    std::vector<float> inside_;
+    // Where a side cuts the disc at distance d along its in-disc normal m, the kernel keeps only the strip
+    // |w·m| < d, the cut disc's part that is symmetric about its centre: the light's gradient across the disc
+    // then averages out, where dividing the cut disc by its part inside would read the light a third of a
+    // radius further from the side (the vials' top and bottom rows, lit from above, came out 11 % darker at a
+    // radius of 2 pixels than at 1). cut = m / d (zero: no cut); fraction = the kernel's area over π r².
+    struct Inside {
+        float fraction;
+        float cut[3];
+    };
+    std::vector<Inside> inside_;
     // A uniform grid over the segments' reach: cellStart_[c]..cellStart_[c+1] in cellSegments_.
     Vec3 lo_;
     double cell_ = 1;
@@ -134,13 +144,14 @@ void CameraSegments::gather(const Photon& ph, const Vec3& p, Phase&& phase, doub
         const auto& C = s.curvature;
         t -= (C[0] * w.x * w.x + C[1] * w.y * w.y + C[2] * w.z * w.z + 2 * (C[3] * w.x * w.y + C[4] * w.x * w.z + C[5] * w.y * w.z)) / s.cosDepth;
         if (!(t >= 0 && t <= s.length)) continue;
+        const Inside& in = inside_[s.insideBegin + std::min(s.insideCount - 1, static_cast<uint32_t>(t / s.insideStep + 0.5))];
+        if (std::abs(w.x * in.cut[0] + w.y * in.cut[1] + w.z * in.cut[2]) > 1) continue;
         ++merges;
         const double f = phase(-s.direction);
         if (!(f > 0)) continue;
         if (sigmaT < 0) sigmaT = ph.sigmaT >= 0 ? ph.sigmaT : extinction(ph.medium, ph.lambda);
         const double opticalDepth = sigmaT * t + prefixOpticalDepth(s, ph.lambda);
-        const uint32_t j = std::min(s.insideCount - 1, static_cast<uint32_t>(t / s.insideStep + 0.5));
-        const double value = ph.weight * f * std::exp(-opticalDepth) * s.weight / (photonsPerSegment * inside_[s.insideBegin + j]);
+        const double value = ph.weight * f * std::exp(-opticalDepth) * s.weight / (photonsPerSegment * in.fraction);
         if (value > 0) out.push_back(FilmSplat{s.x, s.y, ph.lambda, value, ph.fluorescent});
     }
 }
