@@ -261,14 +261,14 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
     // side's symmetric strip, or (close to a side) the cut disc over its part inside, a star-shaped region
     // of area ½∫ min(d(φ), r)² dφ. Consistent either way (both tend to the disc as r shrinks); they take out
     // the loss at a box's or a vial's edges, the strip also its first order in the light's gradient (docs/model.md).
-    std::vector<std::array<Inside, kInsideDepths>> fractions(segments_.size());
+    std::vector<std::array<Inside, kInsideDepths>> cuts(segments_.size());
     constexpr size_t kChunk = 256;
     threads.parallelFor((segments_.size() + kChunk - 1) / kChunk, [&](size_t chunk) {
         for (size_t i = chunk * kChunk; i < std::min(segments_.size(), (chunk + 1) * kChunk); ++i) {
             CameraSegment& s = segments_[i];
             if (s.surface) {
                 s.insideCount = 1;
-                fractions[i][0] = Inside{1, {0, 0, 0}};
+                cuts[i][0] = Inside{1, {0, 0, 0}};
                 continue;
             }
             const Frame disc = Frame::fromNormal(s.depthAxis);
@@ -281,7 +281,7 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                 // Each ray's reach inside, in radii; the nearest side's in-disc normal m and distance d.
                 std::array<double, kInsideRays> reach;
                 std::array<Vec3, kInsideRays> along;
-                double d = 1;
+                double d = 1, cutDisc = 0;
                 Vec3 m;
                 for (int k = 0; k < kInsideRays; ++k) {
                     const double phi = 2 * kPi * (k + 0.5) / kInsideRays;
@@ -291,34 +291,33 @@ CameraSegments::CameraSegments(const Scene& scene, const PathTracer& tracer, uin
                     const auto hit = scene.geometry.intersect(Ray{c, along[k]}, 0, s.radius);
                     const bool side = hit && std::abs(dot(hit->n, s.depthAxis)) < kSideCos;
                     reach[k] = side ? hit->t / s.radius : 1.0;
+                    cutDisc += sqr(reach[k]) / kInsideRays;
                     if (!side) continue;
                     Vec3 normal = hit->n - s.depthAxis * dot(hit->n, s.depthAxis);
                     normal = normalize(dot(normal, along[k]) < 0 ? -normal : normal);
                     if (const double dk = reach[k] * dot(along[k], normal); dk < d) d = dk, m = normal;
                 }
+                Inside& in = cuts[i][j];
+                in = Inside{static_cast<float>(std::max(kMinInside, cutDisc)), {0, 0, 0}};
+                if (!(d < 1)) continue;
                 // The strip |w·m| < d against the disc: its area over π r² in closed form, less what the other
                 // rays (a corner's second side), mirrored through the centre, find cut off beyond it.
-                const double strip = d < 1 ? 2 / kPi * (std::asin(d) + d * std::sqrt(1 - d * d)) : 1.0;
-                double cutDisc = 0, stripRays = 0, symmetricRays = 0;
+                double stripRays = 0, symmetricRays = 0;
                 for (int k = 0; k < kInsideRays; ++k) {
-                    cutDisc += sqr(reach[k]) / kInsideRays;
-                    const double edge = d < 1 ? std::min(1.0, d / std::max(1e-12, std::abs(dot(along[k], m)))) : 1.0;
+                    const double edge = std::min(1.0, d / std::max(1e-12, std::abs(dot(along[k], m))));
                     stripRays += sqr(edge);
                     symmetricRays += sqr(std::min({edge, reach[k], reach[(k + kInsideRays / 2) % kInsideRays]}));
                 }
-                const double symmetric = strip * symmetricRays / stripRays;
-                if (d < 1 && symmetric >= kMinInside) {
-                    const Vec3 cut = m / (d * s.radius);
-                    fractions[i][j] = Inside{static_cast<float>(symmetric), {static_cast<float>(cut.x), static_cast<float>(cut.y), static_cast<float>(cut.z)}};
-                } else {
-                    fractions[i][j] = Inside{static_cast<float>(std::max(kMinInside, cutDisc)), {0, 0, 0}};
-                }
+                const double symmetric = 2 / kPi * (std::asin(d) + d * std::sqrt(1 - d * d)) * symmetricRays / stripRays;
+                if (symmetric < kMinInside) continue;
+                const Vec3 cut = m / (d * s.radius);
+                in = Inside{static_cast<float>(symmetric), {static_cast<float>(cut.x), static_cast<float>(cut.y), static_cast<float>(cut.z)}};
             }
         }
     });
     for (size_t i = 0; i < segments_.size(); ++i) {
         segments_[i].insideBegin = static_cast<uint32_t>(inside_.size());
-        inside_.insert(inside_.end(), fractions[i].begin(), fractions[i].begin() + segments_[i].insideCount);
+        inside_.insert(inside_.end(), cuts[i].begin(), cuts[i].begin() + segments_[i].insideCount);
     }
 
     reach_.resize(segments_.size());

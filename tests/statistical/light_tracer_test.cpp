@@ -329,10 +329,10 @@ TEST(LightTracer, MergingEqualsTheCameraPathsItReplaces) {
 // A vial's glass base or cap guides light by total internal reflection: a camera ray that enters it can
 // reflect off its faces tens of times before it reaches the liquid. Such a chain must still be merged, or
 // the camera path finds that light itself, only by chance: with chains cut at 8 events these paths were
-// the vials' heaviest samples (at 720 spp one sample raised its pixel 15-fold). Here a camera ray enters the end of
-// a glass slab, reflects 18 times inside it, leaves by the far end and enters a bare dyed liquid lit by a
-// point light: without the partition its camera paths find fluorescence, with it they must leave all of
-// it to the photons.
+// the vials' heaviest samples (at 720 spp one sample raised its pixel 15-fold). Here a camera ray enters
+// the end of a glass slab, reflects 18 times inside it, leaves by the far end and enters a bare dyed liquid
+// lit by a point light: without the partition its camera paths find fluorescence, with it they must leave
+// all of it to the photons.
 TEST(LightTracer, AChainGuidedByTotalInternalReflectionIsMerged) {
     Scene scene;
     scene.spectral = {400, 700, 20};
