@@ -81,9 +81,13 @@ def main():
     seeds = (1, 2)
     if "--seeds" in args:
         i = args.index("--seeds")
-        seeds = tuple(int(v) for v in args[i + 1].split(","))
+        given = args[i + 1] if i + 1 < len(args) else ""
+        try:
+            seeds = tuple(int(v) for v in given.split(","))
+        except ValueError:
+            seeds = ()
         if len(seeds) != 2:
-            sys.exit(f"paper-scene-error.py: --seeds takes two seeds A,B, got {args[i + 1]!r}")
+            sys.exit(f"paper-scene-error.py: --seeds takes two integer seeds A,B, got {given!r}")
         del args[i:i + 2]
     path = args[0]
     with open(path) as f:
