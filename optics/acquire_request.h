@@ -26,6 +26,7 @@ struct AcquireRequest {
     std::vector<std::string> channels;  // names to acquire (default: all)
     std::optional<std::string> exposure;  // a time ("20 ms"), or "auto" / "auto:F" (autoExpose at F of the full well, 0.5 by default)
     std::optional<int64_t> fieldPhotons;   // the excitation field's photons per beam line side and plane (0: off)
+    std::optional<int64_t> emissionPhotons;  // the scattered emission's photons per plane and channel (0: paths carry it)
 };
 
 // --exposure: a time replaces the scene's; "auto[:F]" asks for autoExpose after the stack is acquired.
@@ -73,6 +74,8 @@ inline void checkAcquireRequest(const AcquireRequest& a) {
     parseExposure(a.exposure);
     if (a.fieldPhotons && (*a.fieldPhotons < 0 || *a.fieldPhotons == 1 || *a.fieldPhotons > (int64_t(1) << 40)))
         throw ConfigError("--field-photons: must be 0 (no field) or lie in [2, 2^40], got " + std::to_string(*a.fieldPhotons));
+    if (a.emissionPhotons && (*a.emissionPhotons < 0 || *a.emissionPhotons == 1 || *a.emissionPhotons > (int64_t(1) << 40)))
+        throw ConfigError("--emission-photons: must be 0 (paths carry the scattered emission) or lie in [2, 2^40], got " + std::to_string(*a.emissionPhotons));
 }
 
 // The stack overrides (planes, step) of acquire and fit, applied to `m` and validated against the scene.
@@ -114,6 +117,7 @@ inline AcquireOptions applyAcquireRequest(const AcquireRequest& a, const Scene& 
     if (o.noiseRatio) o.maxSpp = std::max(o.maxSpp, o.spp);
     o.threads = a.threads;
     if (a.fieldPhotons) o.field.photons = static_cast<uint64_t>(*a.fieldPhotons);
+    if (a.emissionPhotons) o.emission.photons = static_cast<uint64_t>(*a.emissionPhotons);
     return o;
 }
 

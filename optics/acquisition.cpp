@@ -8,6 +8,7 @@
 #include "core/memory_cap.h"
 #include "core/parallel.h"
 #include "core/rng.h"
+#include "optics/image_pooling.h"
 #include "render/fluence_field.h"
 #include "render/fluorescence.h"
 #include "render/straight_line.h"
@@ -61,6 +62,7 @@ void AcquireOptions::validate() const {
     unscattered.validate();
     psf.validate();
     field.validate();
+    emission.validate();
 }
 
 uint64_t planeStreamKey(const std::string& channelName, int plane) { return mixBits(hashName(channelName) + mixBits(static_cast<uint64_t>(plane) + 1)); }
@@ -72,9 +74,10 @@ namespace {
 class PathImaging final : public CameraPathImaging {
 public:
     PathImaging(const Imaging& imaging, const UnscatteredModel* computed, const EmissionPoints* emission, const Vec3& pixelPoint,
-                double poolingFraction)
+                double poolingFraction, const ScatteredEmissionImage* traced = nullptr)
         : imaging_(imaging), computed_(computed), emission_(emission && !emission->empty() ? emission : nullptr), pixelPoint_(pixelPoint),
-          poolingFraction_(poolingFraction) {}
+          poolingFraction_(poolingFraction), traced_(traced) {}
+    bool tracesFieldLitEmission(int medium) const override { return traced_ && traced_->tracesFieldLit(medium); }
     SampledSpectrum firstVertexWeight(const Vec3& y, const SampledWavelengths& wl) const override {
         return imaging_.firstVertexWeight(pixelPoint_, y, wl);
     }
@@ -99,6 +102,7 @@ private:
     const EmissionPoints* emission_;
     Vec3 pixelPoint_;
     double poolingFraction_;
+    const ScatteredEmissionImage* traced_;
 };
 
 // Pilot paths of adaptive sampling draw from sample indices the estimate never reaches.
@@ -114,42 +118,6 @@ struct PixelTally {
     }
     double mean() const { return n ? sum / n : 0.0; }
     double varianceOfMean() const { return n > 1 ? std::max(0.0, sum2 / n - sqr(sum / n)) / (n - 1) : 0.0; }
-};
-
-// Blocks of 2^k × 2^k pixels over an image, the last ones cut by its edge, and the bilinear weights that
-// spread block means back to every pixel: the pooling's one rule, for the total and for each label.
-struct PoolingBlocks {
-    int width, height, k, block, bx, by;
-    PoolingBlocks(int w, int h, int level) : width(w), height(h), k(level), block(1 << level), bx(((w - 1) >> level) + 1), by(((h - 1) >> level) + 1) {}
-    size_t count() const { return static_cast<size_t>(bx) * by; }
-    size_t of(int x, int y) const { return static_cast<size_t>((y >> k) * bx + (x >> k)); }
-    double pixels(size_t b) const {
-        const int cx = static_cast<int>(b % static_cast<size_t>(bx)), cy = static_cast<int>(b / static_cast<size_t>(bx));
-        return double(std::min(block, width - cx * block)) * std::min(block, height - cy * block);
-    }
-    // f(pixel, weights): the four (block, weight) pairs that interpolate between block centres at a pixel.
-    template <class F>
-    void forEachPixel(F&& f) const {
-        auto axis = [&](int p, int blocks, int* c0, int* c1, double* t) {
-            const double u = (p + 0.5) / block - 0.5;
-            *c0 = std::clamp(static_cast<int>(std::floor(u)), 0, blocks - 1);
-            *c1 = std::min(*c0 + 1, blocks - 1);
-            *t = std::clamp(u - *c0, 0.0, 1.0);
-        };
-        for (int y = 0; y < height; ++y) {
-            int y0, y1, x0, x1;
-            double fy, fx;
-            axis(y, by, &y0, &y1, &fy);
-            for (int x = 0; x < width; ++x) {
-                axis(x, bx, &x0, &x1, &fx);
-                const std::array<std::pair<size_t, double>, 4> w{{{static_cast<size_t>(y0 * bx + x0), (1 - fx) * (1 - fy)},
-                                                                  {static_cast<size_t>(y0 * bx + x1), fx * (1 - fy)},
-                                                                  {static_cast<size_t>(y1 * bx + x0), (1 - fx) * fy},
-                                                                  {static_cast<size_t>(y1 * bx + x1), fx * fy}}};
-                f(static_cast<size_t>(y) * width + x, w);
-            }
-        }
-    }
 };
 
 // Adds the pooled parts to an image: per level k, the rows' sums of pixel means by block column become
@@ -191,20 +159,6 @@ void addPooledParts(const Rows& rows, int width, int height, PlaneImage& r, SumO
         });
     }
     for (size_t i = 0; i < variance.size(); ++i) r.stderrElectrons[i] = std::sqrt(variance[i]);
-}
-
-// An image of per-pixel means pooled over blocks of 2^k pixels (addPooledParts' rule, for one image).
-std::vector<double> poolImage(const std::vector<double>& image, int width, int height, int k) {
-    const PoolingBlocks blocks(width, height, k);
-    std::vector<double> mean(blocks.count(), 0.0);
-    for (int y = 0; y < height; ++y)
-        for (int x = 0; x < width; ++x) mean[blocks.of(x, y)] += image[static_cast<size_t>(y) * width + x];
-    for (size_t b = 0; b < mean.size(); ++b) mean[b] /= blocks.pixels(b);
-    std::vector<double> out(image.size(), 0.0);
-    blocks.forEachPixel([&](size_t pixel, const std::array<std::pair<size_t, double>, 4>& w) {
-        for (const auto& [i, wi] : w) out[pixel] += wi * mean[i];
-    });
-    return out;
 }
 
 PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const ObjectiveOptions& objective, const FocalPlane& focus,
@@ -251,6 +205,36 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         r.fieldElectrons = u.fieldElectrons;
         r.fieldHalfDifference = u.fieldHalfDifference;
     }
+    const bool bends = hasRefractingSurfaces(scene);
+    // The computed emission's scattered light, traced forward; the paths then leave it out.
+    ScatteredEmissionImage traced;
+    // Only where something scatters: in clear tissue the paths' share (re-emission alone) costs less than photons.
+    const bool scattersEmission = std::any_of(scene.media.begin(), scene.media.end(), [&](const Medium& m) {
+        if (m.isVacuumLike() || !(m.channelMax()[kScatteringChannel] > 0)) return false;
+        for (double l = scene.spectral.lambdaMin; l <= scene.spectral.lambdaMax; l += 1)
+            if (m.scatteringAt(l) > 0 && emission.transmission(l) > 0) return true;
+        return false;
+    });
+    const bool emissionTraced = model && emissionPoints && !emissionPoints->empty() && o.emission.photons > 0 && scattersEmission &&
+                                tracer.fluorescence().model() == FluorescenceModel::Full;
+    if (emissionTraced) {
+        const PathImaging covered(imaging, model, emissionPoints.get(), imaging.centre(), o.poolingFraction);
+        traced = traceScatteredEmission(scene, tracer, imaging, covered, *emissionPoints, field.get(), detection, detector.exposureS, o.emission,
+                                        o.seed, streamKey, o.threads, o.cancel);
+        if (!traced.complete) {
+            r.complete = false;
+            return r;
+        }
+        r.emissionPhotons = traced.photons;
+        r.emissionVertices = traced.vertices;
+        r.emissionSeconds = traced.seconds;
+        r.emissionVariance = traced.variance;
+        r.emissionEstimates = traced.slots;
+        for (size_t i = 0; i < computed.size(); ++i) {
+            computed[i] += traced.electrons[i];
+            r.emissionElectrons += traced.electrons[i];
+        }
+    }
     // Each row's totals, kept apart so that threads never share them; summed into the image at the end.
     struct RowTotals {
         PathStats stats;
@@ -273,7 +257,6 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
     const double darkElectrons = detector.darkCurrentElectronsPerS * detector.exposureS;
     int rowsDone = 0;
     std::mutex progressMutex;  // the callback is called from one thread at a time
-    const bool bends = hasRefractingSurfaces(scene);
     parallelFor(static_cast<size_t>(height), o.threads, [&](size_t yRow) {
         if (o.cancel && o.cancel->load()) return;
         const int y = static_cast<int>(yRow);
@@ -304,10 +287,11 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                     for (int j = 1; j < kNumWavelengths; ++j) pathStart.r_u[j] = psf.displacementDensity(radius, wl.lambda[j]) / hero;
                     pathStart.beta = pathStart.r_u;
                 }
-                const PathImaging pathImaging(imaging, model, emissionPoints.get(), point, o.poolingFraction);
+                const PathImaging pathImaging(imaging, model, emissionPoints.get(), point, o.poolingFraction, emissionTraced ? &traced : nullptr);
                 pathStart.imaging = &pathImaging;
                 pathStart.labels = o.labels;
                 pathStart.field = field.get();
+                pathStart.computedEmissionTraced = emissionTraced;
                 const double uPhi = rng.uniform();  // drawn in the order the streams have always used
                 const double uCos = rng.uniform();
                 const Imaging::CameraStart cameraStart = imaging.cameraStart(scene, bends, focal, uCos, uPhi, wl);
@@ -381,10 +365,10 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
             row.samples += static_cast<uint64_t>(n);
             row.pathSeconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
             r.electrons[pixel] = paths.mean() + computed[pixel];
-            r.stderrElectrons[pixel] = std::sqrt(paths.varianceOfMean());
+            r.stderrElectrons[pixel] = std::sqrt(paths.varianceOfMean() + (emissionTraced ? traced.variance[pixel] : 0.0));
             row.largest = std::max(row.largest, largest);
             largestInPixel[pixel] = largestOwn;
-            row.computed += computed[pixel];
+            row.computed += computed[pixel] - (emissionTraced ? traced.electrons[pixel] : 0.0);
             row.path += paths.mean();
         }
         row.done = true;

@@ -25,6 +25,7 @@
 
 #include "optics/imaging.h"
 #include "optics/microscope.h"
+#include "optics/scattered_emission.h"
 #include "optics/unscattered_image.h"
 #include "render/fluence_field.h"
 #include "render/path_tracer.h"
@@ -52,6 +53,9 @@ struct ExcitationFieldOptions {
 struct AcquireOptions {
     Estimator estimator = Estimator::Split;
     ExcitationFieldOptions field;
+    // The computed emission's scattered light traced forward from its points (optics/scattered_emission.h;
+    // split estimator, scenes without refracting surfaces); photons 0 leaves it to the camera paths.
+    ScatteredEmissionOptions emission;
     int spp = 16;                    // path samples per pixel
     UnscatteredOptions unscattered;  // the quadrature of the computed part (split)
     // Light imaged through a first vertex far from focus (its image a disc of radius ρ pixels) is pooled
@@ -99,6 +103,13 @@ struct PlaneImage {
     uint64_t fieldPhotons = 0;
     double fieldSeconds = 0, fieldElectrons = 0;
     std::vector<double> fieldHalfDifference;
+    // The computed emission's scattered light traced forward (AcquireOptions::emission): its photons, their
+    // vertices imaged, its time and its photoelectrons summed over pixels (in `electrons`, its variance in
+    // stderrElectrons).
+    uint64_t emissionPhotons = 0, emissionVertices = 0;
+    double emissionSeconds = 0, emissionElectrons = 0;
+    std::vector<double> emissionVariance;                 // per pixel (part of stderrElectrons²)
+    std::vector<std::vector<double>> emissionEstimates;   // independent estimates of its image (ScatteredEmissionImage::slots)
     std::vector<std::vector<double>> labelledElectrons;  // with AcquireOptions::labels: per key, the paths' re-emissions per pixel
     // Paths traced for the estimate and for adaptive sampling's pilots (0 without a noise target).
     uint64_t pathSamples = 0, pilotSamples = 0;

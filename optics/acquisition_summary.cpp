@@ -62,6 +62,10 @@ std::string AcquisitionSummary::addPlane(size_t slot, int plane, const PlaneImag
     fieldPhotons_ += image.fieldPhotons;
     fieldSeconds_ += image.fieldSeconds;
     fieldSum_ += image.fieldElectrons;
+    emissionPhotons_ += image.emissionPhotons;
+    emissionVertices_ += image.emissionVertices;
+    emissionSeconds_ += image.emissionSeconds;
+    emissionSum_ += image.emissionElectrons;
     pathSamples_ += image.pathSamples;
     pilotSamples_ += image.pilotSamples;
     pixels_ += image.electrons.size();
@@ -88,7 +92,7 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
     float maxE = 0;
     for (float e : stack.expected) maxE = std::max(maxE, e);
     const Saturation sat = saturation(stack, m.detector.fullWellElectrons);
-    const double total = std::max(1e-300, computedSum_ + pathSum_);
+    const double total = std::max(1e-300, computedSum_ + pathSum_ + emissionSum_);
     const auto perPath = [&](uint64_t n) { return double(n) / std::max<double>(1.0, double(stats_.paths)); };
     const double vertices = perPath(stats_.scatteringEvents + stats_.surfaceBounces);
     std::vector<Entry> e = {
@@ -119,6 +123,11 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
         {"excitation_field", "electrons_fraction", fieldSum_ / total},
         // Its noise (correlated across pixels; from the field's two halves) over the camera's, brightest 10 %.
         {"excitation_field", "median_noise_over_camera_variance_top10", median(fieldOverCamera_), fieldOverCamera_.empty()},
+        // The computed emission's scattered light, traced forward from its points (split estimator).
+        {"scattered_emission", "photons", double(emissionPhotons_), false, true},
+        {"scattered_emission", "vertices", double(emissionVertices_), false, true},
+        {"scattered_emission", "seconds", emissionSeconds_},
+        {"scattered_emission", "electrons_fraction", emissionSum_ / total},
         {"", "median_relative_stderr_top10", median(pathRel_)},
         {"", "non_finite_samples", double(nonFinite_), false, true},
         {"", "largest_sample_over_pixel", largestOverPixel_},

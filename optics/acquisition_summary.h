@@ -55,6 +55,8 @@ private:
     // brightest pixels its noise variance (from its two halves) over the camera's.
     uint64_t fieldPhotons_ = 0;
     double fieldSeconds_ = 0, fieldSum_ = 0;
+    uint64_t emissionPhotons_ = 0, emissionVertices_ = 0;
+    double emissionSeconds_ = 0, emissionSum_ = 0;
     std::vector<double> fieldOverCamera_;
 };
 

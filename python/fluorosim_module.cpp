@@ -203,10 +203,12 @@ struct StackSetup {
 py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, const std::optional<std::string>& step, std::optional<int> spp,
                  std::optional<int64_t> seed, const std::vector<std::string>& channels, int threads, const std::optional<std::string>& base,
                  const std::string& estimator, std::optional<int> directSpp, std::optional<double> noiseRatio, std::optional<int> maxSpp,
-                 const py::object& progress, const std::optional<std::string>& exposure, std::optional<int64_t> fieldPhotons) {
+                 const py::object& progress, const std::optional<std::string>& exposure, std::optional<int64_t> fieldPhotons,
+                 std::optional<int64_t> emissionPhotons) {
     optics::AcquireRequest request;
     request.exposure = exposure;
     request.fieldPhotons = fieldPhotons;
+    request.emissionPhotons = emissionPhotons;
     request.planes = planes;
     request.step = step;
     request.spp = spp;
@@ -650,13 +652,14 @@ PYBIND11_MODULE(fluorosim, mod) {
             py::arg("spp") = py::none(), py::arg("seed") = py::none(), py::arg("channels") = std::vector<std::string>{},
             py::arg("threads") = 0, py::arg("base") = py::none(), py::arg("estimator") = "split", py::arg("direct_spp") = py::none(),
             py::arg("noise_ratio") = py::none(), py::arg("max_spp") = py::none(), py::arg("progress") = py::none(),
-            py::arg("exposure") = py::none(), py::arg("field_photons") = py::none(),
+            py::arg("exposure") = py::none(), py::arg("field_photons") = py::none(), py::arg("emission_photons") = py::none(),
             "Acquire a light-sheet z-stack of a scene with a microscope block. Returns a dict: counts (uint16), expected and "
             "stderr (float32), each (channel, z, y, x); channels, the geometry (axes, origin_um, x/y_step_um, z_step_vector_um, "
             "pixel_size_um, z_step_um), spp, seed, exposure_s, and summary (the CLI's JSON summary as a dict). Same numbers as "
             "`fluorosim acquire` with the same options (estimator: split or path; noise_ratio and max_spp: adaptive sampling; "
             "exposure: a time such as \"20 ms\", or \"auto\" / \"auto:F\" to put the brightest pixel at F of the full well; "
-            "field_photons: the excitation field's photons per beam line and plane, 0 for none). "
+            "field_photons: the excitation field's photons per beam line and plane, 0 for none; emission_photons: the photons per "
+            "plane and channel that trace the computed emission's scattered light forward, 0 to leave it to camera paths). "
             "progress: a callable given the fraction done (0..1), about every 0.1 s. Ctrl-C stops the run and raises "
             "KeyboardInterrupt.");
     mod.def("ground_truth", &groundTruthOf, py::arg("scene"), py::kw_only(), py::arg("planes") = py::none(), py::arg("step") = py::none(),

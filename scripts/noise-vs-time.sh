@@ -5,8 +5,9 @@
 # the brightest 10 % of pixels, the issue's measure, and over the brightest 1 %: the neurites cover only
 # a few per cent of the field, so in clear tissue the brightest 10 % include pixels with no signal at
 # all, equal in both renders). Tissues: clear, the sample's (sigma_s 1 /mm), sigma_s 2 /mm and uncleared
-# cortex (sigma_s 20 /mm, g 0.9); estimators: split without the excitation field (--field-photons 0,
-# paths carry the scattered excitation), split with it (the default), and with it adaptively.
+# cortex (sigma_s 20 /mm, g 0.9); estimators: split with the excitation field and camera paths carrying
+# the scattered emission (the default), split with the scattered emission traced forward from the computed
+# and field-lit emission (--emission-photons 524288), and that adaptively.
 # Usage: scripts/noise-vs-time.sh [build/apps/fluorosim] > table.md
 # Needs samples/neurons/neurons.vdb (samples/neurons/make_volume.sh) and python3-numpy/-tifffile.
 set -euo pipefail
@@ -33,8 +34,8 @@ PY
 tissue "0 /mm" "$work/clear.json"
 tissue "2 /mm" "$work/s2.json"
 tissue "20 /mm" "$work/cortex.json"
-echo "| tissue | estimator | paths per pixel | seconds per plane (2 channels) | median MC / shot variance, top 10 % | top 1 % | relative RMS MC error, top 1 % | sum ratio | largest sample / pixel | field noise / shot, top 10 % |"
-echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+echo "| tissue | estimator | paths per pixel | seconds per plane (2 channels) | median MC / shot variance, top 10 % | top 1 % | relative RMS MC error, top 1 % | sum ratio | largest sample / pixel | field noise / shot, top 10 % | tracing the scattered emission (s per channel) |"
+echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
 run() {  # tissue scene label spp [more acquire options]
     local tag=$1 file=$2 est=$3 spp=$4
     shift 4
@@ -55,13 +56,14 @@ paths = f"{sum(x['mean_path_spp'] for x in s) / 2:.1f} (adaptive)" if "noise-rat
 largest = max(x["largest_sample_over_pixel"] for x in s)
 f = [x["excitation_field"]["median_noise_over_camera_variance_top10"] for x in s]
 field = "-" if f[0] is None else f"{sum(f) / 2:.3g}"
+traced = s[0].get("scattered_emission", {}).get("seconds", 0) / 2
 print(f"| {tag} | {est} | {paths} | {seconds:.1f} | {r10['median_mc_over_shot_variance']:.3g} | "
-      f"{r1['median_mc_over_shot_variance']:.3g} | {r1['relative_rms_mc_error']:.3g} | {r10['sum_ratio_a_over_b']:.3f} | {largest:.2f} | {field} |")
+      f"{r1['median_mc_over_shot_variance']:.3g} | {r1['relative_rms_mc_error']:.3g} | {r10['sum_ratio_a_over_b']:.3f} | {largest:.2f} | {field} | {traced:.1f} |")
 PY
 }
 for tissue in "clear:$work/clear.json" "sigma_s 1 /mm:$scene" "sigma_s 2 /mm:$work/s2.json" "cortex, sigma_s 20 /mm:$work/cortex.json"; do
     tag=${tissue%%:*} file=${tissue#*:}
-    run "$tag" "$file" "split, no field" 4 --field-photons 0
-    run "$tag" "$file" "split, field" 4
-    run "$tag" "$file" "split, field, --noise-ratio 0.5" 4 --noise-ratio 0.5 --max-spp 64
+    run "$tag" "$file" "split, field, paths carry scattered emission" 4
+    run "$tag" "$file" "split, field, scattered emission traced (--emission-photons 524288)" 4 --emission-photons 524288
+    [ "$tag" = "cortex, sigma_s 20 /mm" ] || run "$tag" "$file" "split, field, traced, --noise-ratio 0.5" 4 --emission-photons 524288 --noise-ratio 0.5 --max-spp 64
 done

@@ -315,6 +315,7 @@ struct PathTracer::PathState {
     const CameraPathImaging* imaging = nullptr;
     bool firstSegment = false;
     StartBeamWeight startBeam;  // of a sub-path's first vertex
+    const CameraPathImaging* traced = nullptr;  // StartBeamWeight::traced, for every branch of the path
     // The sheet-side strategy ran at the last medium vertex (prevScatter): the phase pdf of the direction
     // the path then took and the proposal's asymmetry there, for the MIS weight of a beam connection
     // at the next vertex (sheetScattering).
@@ -358,6 +359,7 @@ PathRadiance PathTracer::radiance(Ray ray, int medium, const SampledWavelengths&
     state.beta = start.beta;
     state.r_u = start.r_u;
     state.imaging = start.imaging;
+    state.traced = start.computedEmissionTraced ? start.imaging : nullptr;
     state.labels = start.labels;
     state.field = start.field;
     state.tMin = start.tMin;
@@ -386,6 +388,7 @@ PathRadiance PathTracer::traceFromEmission(const Vec3& p, int medium, const Samp
     state.generation = generation;
     state.startsAtEmission = true;
     state.startBeam = startBeam;
+    state.traced = startBeam.traced;
     return trace(state, wl, rng, stats);
 }
 
@@ -432,10 +435,15 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double
     // At a line inside the excitation field the scattered light is looked up and the unscattered light
     // evaluated, not traced. Where the camera's imaging computes the emission, it holds both inside the
     // beams' cores, which take the start weight.
+    // Where the microscope traces the covered emission forward, no branch counts it.
+    if (startBeam.traced && startBeam.traced->computesUnscatteredAt(p)) startBeam = {startBeam.traced, 0.0, startBeam.traced};
     const double coreWeight = startBeam.imaging && startBeam.imaging->computesUnscatteredAt(p) ? startBeam.weight : 1.0;
     std::optional<double> scattered;
-    if (field && wlx.discrete && fluorescence_.model() == FluorescenceModel::Full)
-        scattered = field->scatteredMeanRadiance(p, wlx.lambda[0], coreWeight, 1.0);
+    if (field && wlx.discrete && fluorescence_.model() == FluorescenceModel::Full) {
+        // Where the microscope traces the field-lit emission too, the field's light is all the photons'.
+        const bool fieldLit = startBeam.traced && startBeam.traced->tracesFieldLitEmission(medium);
+        scattered = field->scatteredMeanRadiance(p, wlx.lambda[0], fieldLit ? 0.0 : coreWeight, fieldLit ? 0.0 : 1.0);
+    }
     if (scattered) {
         const double mean = *scattered + unscatteredMeanRadiance(p, medium, wlx.lambda[0], coreWeight, 1.0, rng);
         for (int k = 0; k < kNumWavelengths; ++k) Lx[k] = start[k] * mean;
@@ -503,6 +511,10 @@ double PathTracer::unscatteredMeanRadiance(const Vec3& y, int medium, double lam
         }
     }
     return total * kInv4Pi;
+}
+
+double PathTracer::coreMeanRadiance(const Vec3& p, int medium, double lineNm, const ExcitationField* field, Rng& rng) const {
+    return (field ? field->scatteredMeanRadiance(p, lineNm, 1.0, 0.0).value_or(0.0) : 0.0) + unscatteredMeanRadiance(p, medium, lineNm, 1.0, 0.0, rng);
 }
 
 PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const {
@@ -818,7 +830,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
             Vec3(), nullptr, 0.0, startBeam);
         const bool sheets = sheetLinesAt(wl);
         // Camera paths (not sub-paths) at emission wavelengths connect to the computed emission.
-        const bool emission = st.imaging && !st.startsAtEmission && st.generation == 0 && !wl.discrete && fluorescence_.active();
+        const bool emission = st.imaging && !st.traced && !st.startsAtEmission && st.generation == 0 && !wl.discrete && fluorescence_.active();
         if (emission) Lf += emissionConnection(p, [&](const Vec3& wi) { return phase.pdf(dirIn, wi); });
         // In the medium at p, at the hero wavelength: the phase-sampled side's density proxy, for the
         // sheet-side strategy's MIS and the emission connection's.
@@ -917,6 +929,7 @@ PathRadiance PathTracer::trace(PathState& st, const SampledWavelengths& wl, Rng&
                                         pc > 0 ? 1 - emissionMis(pc, st.lastPhasePdf, length(y - prevScatter), sigmaB.average(), st.lastFloorExtinction) : 1.0;
                                     startBeam = {st.imaging, mis};
                                 }
+                                startBeam.traced = st.traced;
                                 std::array<LabelledChannels, kMaxLabelsAtPoint> parts;
                                 std::array<SampledSpectrum, kMaxLabelsAtPoint> partResults;
                                 const int partCount = st.labels ? st.labels->split(medium, y, ch.data(), parts) : 0;

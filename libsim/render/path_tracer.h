@@ -104,6 +104,10 @@ public:
     // How finely the light that leaves y (a first vertex) is imaged: 0 per pixel, k in [1, kImageLevels)
     // pooled over blocks of 2^k × 2^k pixels (where y's image is a disc much wider than the block).
     virtual int imageLevel(const Vec3& /*y*/) const { return 0; }
+    // With PathStart::computedEmissionTraced: whether the caller also traces the emission that an
+    // excitation field's light excites beyond the computed part, in `medium` (no branch there counts the
+    // field's light then).
+    virtual bool tracesFieldLitEmission(int /*medium*/) const { return false; }
 };
 
 // The scattered light of beams at spectral lines, computed rather than sampled (render/fluence_field.h):
@@ -143,6 +147,11 @@ struct PathStart {
     // into a stack above, leaves out the scatterings and branch points of that medium's segment: photon
     // merging carries them (render/photon_merging.h).
     bool mergedSegments = false;
+    // The microscope traces the computed emission's light forward from its points (optics/scattered_emission.h):
+    // every branch, of any generation and on any segment, leaves out the beams' light at their lines inside
+    // their cores where `imaging` computes the emission (the unscattered light and the excitation field's), and
+    // the camera path makes no connections to the computed emission.
+    bool computedEmissionTraced = false;
 };
 
 // The longest chain of dielectric events before a merged segment (PathStart::mergedSegments). Long, because a
@@ -171,6 +180,9 @@ struct StackEntry {
 struct StartBeamWeight {
     const CameraPathImaging* imaging = nullptr;
     double weight = 1;
+    // PathStart::computedEmissionTraced: the imaging whose covered emission no branch of this path or its
+    // sub-paths counts (null otherwise).
+    const CameraPathImaging* traced = nullptr;
 };
 
 class PathTracer {
@@ -208,6 +220,13 @@ public:
     // and the index of the stack whose innermost sphere holds p in `medium` (-1 if none).
     const std::vector<SphericalShells>& shells() const { return shells_; }
     int shellsAround(const Vec3& p, int medium) const;
+    // (1/4π) × the light of the beams at their line λ inside their cores at p: the unscattered light, and with
+    // `field` its scattered light too; times fluorescence().kernel, the emission that a microscope computes as
+    // its unscattered image where it covers p, and traces forward as scattered emission
+    // (optics/scattered_emission.h).
+    double coreMeanRadiance(const Vec3& p, int medium, double lineNm, const ExcitationField* field, Rng& rng) const;
+    // The beams' spectral lines, each once.
+    const std::vector<double>& lineWavelengths() const { return lineWavelengths_; }
 
 private:
     struct PathState;

@@ -130,6 +130,10 @@ void walkPhoton(const Scene& scene, Photon ph, Rng& rng, PhotonEvents& events, b
                     ph.sigmaT = st;
                     events.scattered(ph, p);
                     ph.sigmaT = -1;
+                    if (const double q = events.survival(ph, p); q < 1) {
+                        if (!(rng.uniform() < q)) return;
+                        ph.weight /= q;
+                    }
                     double pdf = 0;
                     ph.ray = Ray{p, m.phase().sample(ph.ray.d, rng.uniform(), rng.uniform(), &pdf)};
                     continue;
@@ -160,6 +164,10 @@ void walkPhoton(const Scene& scene, Photon ph, Rng& rng, PhotonEvents& events, b
                 ph.ray = Ray{p, sampleUniformSphere(rng.uniform(), rng.uniform())};
                 if (ph.weight == 0) return;
                 events.reemitted(ph, p);
+                if (const double q = events.survival(ph, p); q < 1) {
+                    if (!(rng.uniform() < q)) return;
+                    ph.weight /= q;
+                }
                 continue;
             }
             if (!hit) return;  // lost in an unbounded medium
@@ -187,6 +195,10 @@ void walkPhoton(const Scene& scene, Photon ph, Rng& rng, PhotonEvents& events, b
             } else {
                 dir = wt;
                 ph.medium = next;
+            }
+            if (const double q = events.specularSurvival(ph); q < 1) {
+                if (!(rng.uniform() < q)) return;
+                ph.weight /= q;
             }
         } else {
             if (!scatterAtSurfaces) return;

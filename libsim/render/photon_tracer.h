@@ -66,6 +66,12 @@ public:
     virtual void reemitted(const Photon& /*ph*/, const Vec3& /*p*/) {}
     // Left the scene.
     virtual void escaped(const Photon& /*ph*/) {}
+    // After a scattering or a re-emission at p: the probability that the photon goes on (Russian roulette;
+    // a survivor's power is divided by it). Where nothing the caller tallies can follow, below 1 saves time.
+    virtual double survival(const Photon& /*ph*/, const Vec3& /*p*/) { return 1.0; }
+    // The same after a reflection or refraction at a smooth dielectric: light guided without loss by total
+    // internal reflection (a clear block) would otherwise never end.
+    virtual double specularSurvival(const Photon& /*ph*/) { return 1.0; }
 };
 
 // Analog transport of one photon: delta tracking at its wavelength in media (scattering, solvent and dye

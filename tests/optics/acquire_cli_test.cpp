@@ -459,6 +459,8 @@ TEST(AcquireCli, BadNumbersAreRejectedNotCast) {
         {{}, {"--noise-ratio", "0.5", "--max-spp", "0"}, {"--max-spp", "[spp = 1", "0"}},
         {{}, {"--field-photons", "1"}, {"--field-photons", "[2, 2^40]", "1"}},
         {{}, {"--field-photons", "-5"}, {"--field-photons", "-5"}},
+        {{}, {"--emission-photons", "1"}, {"--emission-photons", "[2, 2^40]", "1"}},
+        {{}, {"--emission-photons", "-3"}, {"--emission-photons", "-3"}},
     };
     for (const auto& [edit, extra, parts] : cases) {
         const auto r = run(edit, extra);

@@ -24,6 +24,8 @@ namespace {
 using namespace testing;
 
 constexpr int kSize = 24;
+// The scattered emission traced forward (--emission-photons), as a user turns it on.
+constexpr uint64_t kEmissionPhotons = uint64_t(1) << 19;
 
 Scene filamentScene(double sigmaS) {
     Scene scene;
@@ -57,7 +59,8 @@ Scene filamentScene(double sigmaS) {
 }
 
 optics::PlaneImage render(const Scene& scene, optics::Estimator estimator, int spp, uint64_t seed,
-                          std::optional<double> noiseRatio = std::nullopt, uint64_t fieldPhotons = optics::ExcitationFieldOptions{}.photons) {
+                          std::optional<double> noiseRatio = std::nullopt, uint64_t fieldPhotons = optics::ExcitationFieldOptions{}.photons,
+                          uint64_t emissionPhotons = kEmissionPhotons) {
     optics::ObjectiveOptions objective;
     objective.na = 0.5;
     objective.magnification = 6.5 / 1.5;  // 1.5 µm object pixels: the field spans 36 µm
@@ -73,6 +76,7 @@ optics::PlaneImage render(const Scene& scene, optics::Estimator estimator, int s
     o.noiseRatio = noiseRatio;
     o.maxSpp = 1024;
     o.field.photons = fieldPhotons;
+    o.emission.photons = emissionPhotons;
     return optics::renderPlane(scene, objective, optics::FocalPlane{}, optics::Filter::bandPass(band), detector, kSize, kSize, o);
 }
 
@@ -80,32 +84,50 @@ struct CropSum {
     double sum = 0, variance = 0;
 };
 
-// The crop's sum and its variance: the paths' per pixel, and the excitation field's, correlated across
-// pixels, from its two halves.
+// The crop's sum and its variance: the paths' per pixel, and the excitation field's and the traced scattered
+// emission's, correlated across pixels, from the field's two halves and the emission's independent estimates.
 CropSum crop(const optics::PlaneImage& r, int x0, int y0, int size) {
     CropSum c;
-    double field = 0;
+    double field = 0, traced = 0;
+    std::vector<double> estimates(r.emissionEstimates.size(), 0.0);
     for (int y = y0; y < y0 + size; ++y)
         for (int x = x0; x < x0 + size; ++x) {
             const size_t i = static_cast<size_t>(y * r.width + x);
             c.sum += r.electrons[i];
             c.variance += r.stderrElectrons[i] * r.stderrElectrons[i];
             if (!r.fieldHalfDifference.empty()) field += r.fieldHalfDifference[i];
+            if (!r.emissionVariance.empty()) c.variance -= r.emissionVariance[i];
+            for (size_t s = 0; s < estimates.size(); ++s) estimates[s] += r.emissionEstimates[s][i];
         }
     c.variance += field * field;
+    if (const size_t n = estimates.size(); n > 1) {
+        for (double e : estimates) traced += e;
+        traced /= double(n);
+        double spread = 0;
+        for (double e : estimates) spread += (e - traced) * (e - traced);
+        c.variance += spread / (double(n) * double(n - 1));
+    }
     return c;
 }
 
-void expectSameImage(double sigmaS, int pathSpp, int splitSpp, uint64_t fieldPhotons = optics::ExcitationFieldOptions{}.photons) {
+void expectSameImage(double sigmaS, int pathSpp, int splitSpp, uint64_t fieldPhotons = optics::ExcitationFieldOptions{}.photons,
+                     uint64_t emissionPhotons = kEmissionPhotons) {
     const Scene scene = filamentScene(sigmaS);
     const optics::PlaneImage path = render(scene, optics::Estimator::Path, pathSpp, 11);
-    const optics::PlaneImage split = render(scene, optics::Estimator::Split, splitSpp, 12, std::nullopt, fieldPhotons);
-    std::printf("  sigma_s %.0f/mm: path %.1f s, split %.1f s (computed part %.3g of %.3g e-, of it the excitation field's %.3g e-, %.2f s)\n",
-                sigmaS, path.seconds, split.seconds, split.computedElectrons, split.computedElectrons + split.pathElectrons, split.fieldElectrons,
-                split.fieldSeconds);
+    const optics::PlaneImage split = render(scene, optics::Estimator::Split, splitSpp, 12, std::nullopt, fieldPhotons, emissionPhotons);
+    std::printf("  sigma_s %.0f/mm: path %.1f s, split %.1f s (computed part %.3g of %.3g e-, of it the excitation field's %.3g e-, %.2f s; "
+                "scattered emission traced %.3g e-, %.2f s)\n",
+                sigmaS, path.seconds, split.seconds, split.computedElectrons, split.computedElectrons + split.pathElectrons + split.emissionElectrons,
+                split.fieldElectrons, split.fieldSeconds, split.emissionElectrons, split.emissionSeconds);
     EXPECT_GT(split.computedElectrons, 0.0);
     if (sigmaS > 0) {
-        EXPECT_GT(split.pathElectrons, 0.01 * split.computedElectrons);  // both parts carry signal
+        // Both parts carry signal: the paths, and the traced scattered emission where it is traced.
+        EXPECT_GT(split.pathElectrons + split.emissionElectrons, 0.01 * split.computedElectrons);
+        if (emissionPhotons > 0) {
+            EXPECT_GT(split.emissionElectrons, 0.01 * split.computedElectrons);
+        } else {
+            EXPECT_EQ(split.emissionElectrons, 0.0);
+        }
         if (fieldPhotons > 0) {  // the field lights the filament in the sheet, and its noise is estimated
             EXPECT_GT(split.fieldElectrons, 0.05 * split.computedElectrons);
             EXPECT_EQ(split.fieldHalfDifference.size(), split.electrons.size());
@@ -130,6 +152,12 @@ TEST(SplitEstimator, MatchesThePathEstimatorInClearTissue) { expectSameImage(0.0
 TEST(SplitEstimator, MatchesThePathEstimatorInScatteringTissue) { expectSameImage(2.0, 1024, 1024); }
 
 TEST(SplitEstimator, MatchesThePathEstimatorInScatteringTissueWithoutTheField) { expectSameImage(2.0, 1024, 1024, 0); }
+
+// The camera paths carrying the scattered emission (connections to the computed emission): the estimator
+// before the traced one, kept as an option.
+TEST(SplitEstimator, MatchesThePathEstimatorInScatteringTissueWithPathsForTheScatteredEmission) {
+    expectSameImage(2.0, 1024, 1024, optics::ExcitationFieldOptions{}.photons, 0);
+}
 
 // Adaptive sampling (AcquireOptions::noiseRatio) decides each pixel's number of paths from pilot paths
 // it then discards, so its mean is that of the fixed-spp estimator; it spends the paths where the

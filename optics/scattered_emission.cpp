@@ -1,0 +1,525 @@
+#include "optics/scattered_emission.h"
+
+#include <chrono>
+#include <cmath>
+#include <optional>
+#include <unordered_map>
+
+#include "core/errors.h"
+#include "core/memory_cap.h"
+#include "core/parallel.h"
+#include "core/rng.h"
+#include "core/sampling.h"
+#include "optics/image_pooling.h"
+#include "render/photon_tracer.h"
+#include "render/straight_line.h"
+#include "volume/volume_fields.h"
+
+namespace fluorosim::optics {
+namespace {
+
+// Independent slots of photons (photon i in slot i mod kSlots): the image does not depend on the thread
+// count, and the slots' spread gives each pixel's variance.
+constexpr int kSlots = 16;
+// Share of the wavelength proposal spread uniformly, so that its density is positive wherever a dye emits.
+constexpr double kUniformShare = 0.05;
+// Russian roulette on photons that scatter where no light they send the objective can reach the image: they
+// may still come back, so they go on, less often.
+constexpr double kInvisibleSurvival = 0.5;
+constexpr uint64_t kPhotonsPerPoint = 4;
+// Beyond this distance from the focal plane a vertex's light is a disc wider than 2 × this × tan θ, smooth
+// over many pixels: photons that scatter there go on with probability kFarDepth / |dz|.
+constexpr double kFarDepthMm = 0.02;
+
+// Wavelengths drawn in proportion to the scene's dyes' emission times the detection, on 1 nm cells.
+class EmissionWavelengths {
+public:
+    EmissionWavelengths(const Scene& scene, const std::function<double(double)>& detection)
+        : lo_(scene.spectral.lambdaMin), hi_(scene.spectral.lambdaMax) {
+        const int cells = std::max(1, static_cast<int>(std::ceil(hi_ - lo_)));
+        width_ = (hi_ - lo_) / cells;
+        std::vector<double> g(static_cast<size_t>(cells), 0.0);
+        // Each cell's largest value over 9 points across it: a filter's edge inside a cell must not leave the
+        // density far below the detection there (a photon's weight is the detected emission over it).
+        for (int c = 0; c < cells; ++c)
+            for (int k = 0; k <= 8; ++k) {
+                const double l = lo_ + (c + k / 8.0) * width_;
+                double e = 0;
+                for (const Medium& m : scene.media)
+                    for (const DyeComponent& d : m.dyes()) e += d.dye.emissionPdf(l);
+                g[static_cast<size_t>(c)] = std::max(g[static_cast<size_t>(c)], e * std::max(0.0, detection(l)));
+            }
+        double total = 0;
+        for (double v : g) total += v * width_;
+        cdf_.assign(g.size() + 1, 0.0);
+        density_.assign(g.size(), 0.0);
+        for (size_t c = 0; c < g.size(); ++c) {
+            density_[c] = (total > 0 ? (1 - kUniformShare) * g[c] / total : 0.0) + (total > 0 ? kUniformShare : 1.0) / (hi_ - lo_);
+            cdf_[c + 1] = cdf_[c] + density_[c] * width_;
+        }
+    }
+    // λ and its density (per nm).
+    double sample(double u, double* pdf) const {
+        const double target = u * cdf_.back();
+        const size_t c = std::min(density_.size() - 1, static_cast<size_t>(std::upper_bound(cdf_.begin(), cdf_.end(), target) - cdf_.begin()) - 1);
+        *pdf = density_[c] / cdf_.back();
+        const double within = density_[c] > 0 ? (target - cdf_[c]) / (density_[c] * width_) : 0.5;
+        return lo_ + (static_cast<double>(c) + std::clamp(within, 0.0, 1.0)) * width_;
+    }
+
+private:
+    double lo_, hi_, width_ = 1;
+    std::vector<double> cdf_, density_;
+};
+
+uint64_t blockKey(int medium, int64_t x, int64_t y, int64_t z) {
+    auto part = [](int64_t v) { return static_cast<uint64_t>(v + (1 << 19)) & 0xFFFFF; };
+    return (static_cast<uint64_t>(medium) << 60) ^ (part(x) << 40) ^ (part(y) << 20) ^ part(z);
+}
+
+// The dye in the excitation field's box, in media whose every dye lies in grids: the index cells of the
+// grids (between voxel centres, where trilinear look-ups interpolate one set of eight voxels) whose corners
+// hold dye, drawn in proportion to their largest corner's concentration times the light at their centre (the
+// beams' unattenuated light and the field's, plus the mean of that over the cells, so that every cell that
+// holds dye can be drawn), then a point uniform in the cell. The cells are disjoint: a point's density is its
+// cell's. Its weight, the emission there over that density, is bounded: the concentration at the point is at
+// most the largest corner's, and the light varies little over a cell.
+class DyeCells {
+public:
+    DyeCells(const Scene& scene, const PathTracer& tracer, const BeamExcitationField& field, const std::vector<double>& lines,
+             const std::function<double(double)>& detection)
+        : scene_(scene) {
+        std::vector<Cell> cells;
+        std::vector<Vec3> centres;
+        std::vector<size_t> blockOf;
+        // Per block, the transmittance back along each beam line side from its centre (by quadrature: no
+        // noise, so that no block's cells are drawn far below their light).
+        std::vector<std::vector<double>> blockTransmittance;
+        std::vector<std::pair<const BeamProfile*, std::pair<double, int>>> sides;  // (profile, (line, side)) with the line's power
+        std::vector<double> sidePower;
+        for (const Light& light : tracer.lights())
+            if (const BeamLight* beam = std::get_if<BeamLight>(&light))
+                for (const SpectralLine& l : beam->profile->spectrum().spectralLines())
+                    if (l.power > 0 && std::find(lines.begin(), lines.end(), l.lambdaNm) != lines.end())
+                        for (int side = 0; side < beam->profile->sides(); ++side) {
+                            sides.push_back({beam->profile.get(), {l.lambdaNm, side}});
+                            sidePower.push_back(l.power);
+                        }
+        for (size_t m = 0; m < scene.media.size(); ++m) {
+            const Medium& med = scene.media[m];
+            const VolumeFields* volume = med.volume();
+            if (!volume || med.dyes().empty()) continue;
+            // Only media whose every dye lies in grids (no floor): the cells then hold all of it.
+            bool gridded = true;
+            for (size_t d = 0; d < med.dyes().size(); ++d) {
+                const int c = kFirstDyeChannel + static_cast<int>(d);
+                gridded = gridded && volume->channel(c).grid && volume->channel(c).offset == 0 && med.channelFloor()[static_cast<size_t>(c)] == 0;
+            }
+            if (!gridded) continue;
+            if (media_.size() <= m) media_.resize(scene.media.size(), false);
+            media_[m] = true;
+            // Each dye's detected emission per mol/L over the lines (the cells weigh their dye by it, so that a
+            // dye this channel hardly sees draws few photons).
+            std::vector<double> detected(med.dyes().size(), 0.0);
+            for (size_t d = 0; d < med.dyes().size(); ++d) {
+                ChannelValues unit{};
+                unit[static_cast<size_t>(kFirstDyeChannel) + d] = 1.0;
+                for (double l : lines)
+                    for (double lambda = scene.spectral.lambdaMin + 0.5; lambda < scene.spectral.lambdaMax; lambda += 1)
+                        detected[d] += tracer.fluorescence().kernel(static_cast<int>(m), unit.data(), l, lambda) * std::max(0.0, detection(lambda));
+            }
+            // Blocks of 8³ voxels that hold dye, and the ones before them on each axis: a cell [v, v + 1) is
+            // visited from the block of v.
+            std::unordered_map<uint64_t, bool> blocks;
+            for (size_t d = 0; d < med.dyes().size(); ++d)
+                volume->channel(kFirstDyeChannel + static_cast<int>(d)).grid->forEachBlock([&](const IndexBox& box, double maxValue) {
+                    if (!(maxValue > 0)) return;
+                    for (int64_t bz = (box.lo[2] >> 3) - 1; bz <= box.hi[2] >> 3; ++bz)
+                        for (int64_t by = (box.lo[1] >> 3) - 1; by <= box.hi[1] >> 3; ++by)
+                            for (int64_t bx = (box.lo[0] >> 3) - 1; bx <= box.hi[0] >> 3; ++bx) blocks[blockKey(static_cast<int>(m), bx, by, bz)] = true;
+                });
+            const double cellMm3 = std::abs(volume->worldFromIndex().determinant());
+            std::vector<uint64_t> keys;
+            for (const auto& [key, unused] : blocks) keys.push_back(key);
+            std::sort(keys.begin(), keys.end());  // the same cells in the same order whatever the grid's block order
+            for (uint64_t key : keys) {
+                const int64_t b[3] = {static_cast<int64_t>((key >> 40) & 0xFFFFF) - (1 << 19), static_cast<int64_t>((key >> 20) & 0xFFFFF) - (1 << 19),
+                                      static_cast<int64_t>(key & 0xFFFFF) - (1 << 19)};
+                bool inBox = false;
+                for (int a = 0; a < 8 && !inBox; ++a)
+                    inBox = field.contains(volume->worldFromIndex().apply(
+                        Vec3(8.0 * b[0] + ((a & 1) ? 8.0 : 0.0), 8.0 * b[1] + (((a >> 1) & 1) ? 8.0 : 0.0), 8.0 * b[2] + (((a >> 2) & 1) ? 8.0 : 0.0))));
+                if (!inBox) continue;
+                // The voxels [8b, 8b + 8] on each axis: the corners of the block's cells.
+                IndexBox range;
+                for (int a = 0; a < 3; ++a) {
+                    range.lo[static_cast<size_t>(a)] = static_cast<int32_t>(8 * b[a]);
+                    range.hi[static_cast<size_t>(a)] = static_cast<int32_t>(8 * b[a] + 8);
+                }
+                // The beams' attenuation at the block's centre: the sheet's profile is evaluated per cell, its
+                // attenuation varies on the block's scale.
+                const Vec3 blockCentre = volume->worldFromIndex().apply(Vec3(8.0 * b[0] + 4, 8.0 * b[1] + 4, 8.0 * b[2] + 4));
+                std::vector<double> T(sides.size(), 0.0);
+                for (size_t k = 0; k < sides.size(); ++k) {
+                    const Ray back{blockCentre, -sides[k].first->direction(sides[k].second.second)};
+                    const StraightLine line = traceStraightLine(scene, back, static_cast<int>(m), 0.0, std::numeric_limits<double>::infinity(),
+                                                                LineSurfaces::UntilRefraction);
+                    T[k] = quadratureTransmittance(scene, back, line.segments, SampledWavelengths::atLine(sides[k].second.first, 1.0))[0];
+                }
+                blockTransmittance.push_back(std::move(T));
+                std::vector<std::vector<float>> voxels(med.dyes().size(), std::vector<float>(729, 0.0f));
+                for (size_t d = 0; d < med.dyes().size(); ++d) {
+                    const VolumeChannel& ch = volume->channel(kFirstDyeChannel + static_cast<int>(d));
+                    ch.grid->copyVoxels(range, voxels[d].data());
+                    for (float& v : voxels[d]) v = static_cast<float>(ch.scale * v);
+                }
+                for (int k = 0; k < 8; ++k)
+                    for (int j = 0; j < 8; ++j)
+                        for (int i = 0; i < 8; ++i) {
+                            // Σ over dyes of the largest corner's concentration times its detected emission.
+                            double c = 0;
+                            for (size_t d = 0; d < voxels.size(); ++d) {
+                                float most = 0;
+                                for (int a = 0; a < 8; ++a)
+                                    most = std::max(most, voxels[d][static_cast<size_t>(((k + ((a >> 2) & 1)) * 9 + j + ((a >> 1) & 1)) * 9 + i + (a & 1))]);
+                                c += most * detected[d];
+                            }
+                            if (!(c > 0)) continue;
+                            cells.push_back({static_cast<int>(m), {8 * b[0] + i, 8 * b[1] + j, 8 * b[2] + k}, c, cellMm3});
+                            centres.push_back(volume->worldFromIndex().apply(Vec3(8.0 * b[0] + i + 0.5, 8.0 * b[1] + j + 0.5, 8.0 * b[2] + k + 0.5)));
+                            blockOf.push_back(blockTransmittance.size() - 1);
+                        }
+            }
+        }
+        if (cells.empty()) return;
+        std::vector<double> phi(cells.size(), 0.0);
+        double meanPhi = 0;
+        for (size_t i = 0; i < cells.size(); ++i) {
+            // The sheets' light at the cell, attenuated as at its block's centre.
+            const std::vector<double>& T = blockTransmittance[blockOf[i]];
+            for (size_t k = 0; k < sides.size(); ++k)
+                phi[i] += kInv4Pi * sides[k].first->irradiance(centres[i], sides[k].second.second, sides[k].second.first) * 1e6 * sidePower[k] * T[k];
+            for (double l : lines) phi[i] += field.scatteredMeanRadiance(centres[i], l, 1.0, 1.0).value_or(0.0);
+            meanPhi += phi[i] / static_cast<double>(cells.size());
+        }
+        if (!(meanPhi > 0)) return;
+        for (size_t i = 0; i < cells.size(); ++i) {
+            cells[i].weight *= (phi[i] + meanPhi) * cells[i].volumeMm3;
+            total_ += cells[i].weight;
+            cdf_.push_back(total_);
+        }
+        cells_ = std::move(cells);
+    }
+    bool empty() const { return cells_.empty(); }
+    size_t cells() const { return cells_.size(); }
+    const std::vector<bool>& media() const { return media_; }
+    struct Sample {
+        Vec3 p;
+        int medium = kNone;
+        double pdf = 0;  // per mm³
+    };
+    Sample sample(double uCell, double ux, double uy, double uz) const {
+        const size_t n = std::min(cells_.size() - 1, static_cast<size_t>(std::upper_bound(cdf_.begin(), cdf_.end(), uCell * total_) - cdf_.begin()));
+        const Cell& c = cells_[n];
+        const VolumeFields& volume = *scene_.media[static_cast<size_t>(c.medium)].volume();
+        const Vec3 p = volume.worldFromIndex().apply(Vec3(double(c.v[0]) + ux, double(c.v[1]) + uy, double(c.v[2]) + uz));
+        return {p, c.medium, c.weight / (total_ * c.volumeMm3)};
+    }
+
+private:
+    struct Cell {
+        int medium;
+        int64_t v[3];  // the cell [v, v + 1) in index space
+        double weight, volumeMm3;
+    };
+    const Scene& scene_;
+    std::vector<Cell> cells_;
+    std::vector<double> cdf_;
+    double total_ = 0;
+    std::vector<bool> media_;
+};
+
+}  // namespace
+
+void ScatteredEmissionOptions::validate() const {
+    if (photons == 1 || photons > (uint64_t(1) << 40))
+        throw ConfigError("scattered emission photons must be 0 or lie in [2, 2^40], got " + std::to_string(photons));
+    if (directions < 1 || directions > 1024) throw ConfigError("scattered emission directions per vertex must lie in [1, 1024], got " + std::to_string(directions));
+}
+
+ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTracer& tracer, const Imaging& imaging, const CameraPathImaging& covered,
+                                              const EmissionPoints& emission, const BeamExcitationField* field,
+                                              const std::function<double(double)>& detection, double exposureS,
+                                              const ScatteredEmissionOptions& options, uint64_t seed, uint64_t streamKey, int threads,
+                                              const std::atomic<bool>* cancel) {
+    options.validate();
+    const auto start = std::chrono::steady_clock::now();
+    ScatteredEmissionImage out;
+    const int width = imaging.width(), height = imaging.height();
+    const size_t pixels = static_cast<size_t>(width) * height;
+    out.electrons.assign(pixels, 0.0);
+    out.variance.assign(pixels, 0.0);
+    if (options.photons == 0 || emission.empty()) return out;
+    requireMemory(8.0 * kImageLevels * kSlots * static_cast<double>(pixels), "the scattered emission's images");
+    const EmissionWavelengths wavelengths(scene, detection);
+    const WidefieldPsf& psf = imaging.psf();
+    const Vec3 axis = imaging.axis();
+    const double cosMax = imaging.cosMax(), cone = imaging.coneSolidAngle();
+    const double photons = static_cast<double>(options.photons);
+    const uint64_t key = mixBits(streamKey + 0x656d697373696f6eULL);
+
+    // Per slot and image level, the sum of the deposits on each pixel (levels allocated when first used).
+    struct Slot {
+        std::array<std::vector<double>, kImageLevels> level;
+        uint64_t vertices = 0, deposits = 0;
+    };
+    std::vector<Slot> slots(kSlots);
+
+    // Images a vertex at v: light of power `power` (W, over the photon count) leaving with the phase lobe
+    // around `dirIn` (or isotropically) at λ.
+    struct Projector final : PhotonEvents {
+        const Scene& scene;
+        const PathTracer& tracer;
+        const Imaging& imaging;
+        const CameraPathImaging& covered;
+        const WidefieldPsf& psf;
+        const std::function<double(double)>& detection;
+        Vec3 axis;
+        double cosMax, cone, exposureS;
+        int directions, width, height;
+        Slot* slot = nullptr;
+        Rng* rng = nullptr;
+        Projector(const Scene& s, const PathTracer& t, const Imaging& i, const CameraPathImaging& c, const WidefieldPsf& p,
+                  const std::function<double(double)>& d, Vec3 a, double cm, double co, double e, int dirs)
+            : scene(s), tracer(t), imaging(i), covered(c), psf(p), detection(d), axis(a), cosMax(cm), cone(co), exposureS(e), directions(dirs),
+              width(i.width()), height(i.height()) {}
+
+        // Whether light leaving v toward the objective can land on the image: within the defocus disc's
+        // radius and the PSF displacement's cut of the field.
+        bool visible(const Vec3& v) const {
+            const Imaging::Local l = imaging.local(v);
+            const double reach = std::abs(l.dz) * imaging.tanThetaMax() + margin;
+            const double ox = std::max(0.0, std::abs(l.x) - 0.5 * width * imaging.pixelMm());
+            const double oy = std::max(0.0, std::abs(l.y) - 0.5 * height * imaging.pixelMm());
+            return ox * ox + oy * oy <= reach * reach;
+        }
+        double margin = 0;
+        // Mitsuba 3's rule for lossless specular chains: after a few, each goes on with probability 0.95.
+        int specularEvents = 0;
+        double specularSurvival(const Photon&) override { return ++specularEvents > 8 ? 0.95 : 1.0; }
+        double survival(const Photon&, const Vec3& p) override {
+            if (!visible(p)) return kInvisibleSurvival;
+            const double dz = std::abs(imaging.local(p).dz);
+            return dz > kFarDepthMm ? std::max(kInvisibleSurvival, kFarDepthMm / dz) : 1.0;
+        }
+
+        void image(const Photon& ph, const Vec3& v, const HenyeyGreenstein* phase) {
+            if (!(ph.weight > 0) || ph.medium == kNone) return;
+            ++slot->vertices;
+            if (!visible(v)) return;
+            const double dz = imaging.local(v).dz;
+            const double toFront = imaging.workingDistanceMm() - dz;
+            if (!(toFront > 0)) return;
+            const int level = std::clamp(covered.imageLevel(v), 0, kImageLevels - 1);
+            const int n = level == 0 ? directions : 1;
+            const double det = detection(ph.lambda);
+            if (!(det > 0)) return;
+            const SampledWavelengths wl = SampledWavelengths::atLine(ph.lambda, 1.0);
+            std::vector<double>& img = slot->level[static_cast<size_t>(level)];
+            if (img.empty()) img.assign(static_cast<size_t>(width) * height, 0.0);
+            for (int k = 0; k < n; ++k) {
+                // A direction of the cone: half from the phase lobe (a draw outside the cone gives nothing), half
+                // uniform over the cone; the one-sample mixture density bounds f/q by 2.
+                Vec3 w;
+                double f, q;
+                if (!phase) {
+                    w = imaging.coneDirection(1 - rng->uniform() * (1 - cosMax), 2 * kPi * rng->uniform());
+                    f = kInv4Pi;
+                    q = 1 / cone;
+                } else {
+                    if (rng->uniform() < 0.5) {
+                        double pdf = 0;
+                        w = phase->sample(ph.ray.d, rng->uniform(), rng->uniform(), &pdf);
+                    } else {
+                        w = imaging.coneDirection(1 - rng->uniform() * (1 - cosMax), 2 * kPi * rng->uniform());
+                    }
+                    f = phase->pdf(ph.ray.d, w);
+                    q = 0.5 * f + 0.5 / cone;
+                }
+                const double cosT = dot(w, axis);
+                if (!(cosT >= cosMax) || !(f > 0)) continue;
+                const Vec3 focal = v - w * (dz / cosT);
+                const double T = transmittanceToCamera(v, focal, w, dz / cosT, toFront / cosT, ph.medium, wl);
+                if (!(T > 0)) continue;
+                // Where the camera paths' geometry lands the ray: its focal-plane crossing, less a draw of the
+                // in-focus PSF's displacement, weighed there by h/h_geo.
+                double radius = 0;
+                const Vec3 x = focal - imaging.displacement(rng->uniform(), rng->uniform(), ph.lambda, &radius);
+                const Imaging::Local lx = imaging.local(x), lv = imaging.local(v);
+                const double col = std::floor((lx.x - imaging.leftMm()) / imaging.pixelMm());
+                const double row = std::floor((imaging.topMm() - lx.y) / imaging.pixelMm());
+                if (!(col >= 0 && col < width && row >= 0 && row < height)) continue;
+                const double R = psf.reweight(std::hypot(lx.x - lv.x, lx.y - lv.y), dz, ph.lambda);
+                const double e = exposureS * det * ph.weight * (f / q) * T * R / n;
+                if (!std::isfinite(e)) continue;
+                img[static_cast<size_t>(row) * width + static_cast<size_t>(col)] += e;
+                ++slot->deposits;
+            }
+        }
+        // Transmittance from v along w (sv from the focal-plane crossing, `reach` to the objective's front) as
+        // the camera paths weigh it (Imaging::cameraStart): straight to the front when nothing refracts between
+        // the lower of v and the crossing and the front; else the paths start below the refraction nearest the
+        // crossing and carry the rest as a weight, so v must lie below it, with no refraction between it and
+        // the crossing (0 otherwise: light the camera's model leaves out).
+        double transmittanceToCamera(const Vec3& v, const Vec3& focal, const Vec3& w, double sv, double reach, int medium,
+                                     const SampledWavelengths& wl) {
+            const Vec3 lower = sv < 0 ? v : focal;
+            const double span = sv < 0 ? reach : reach - sv;
+            const StraightLine line = traceStraightLine(scene, Ray{lower, w}, medium, 0.0, span, LineSurfaces::UntilRefraction);
+            if (line.end != LineEnd::Refraction) return tracer.transmittance(v, v + w * reach, medium, wl, *rng)[0];
+            const double toRefraction = line.segments.empty() ? 0.0 : line.segments.back().t1;
+            const double sRefraction = (sv < 0 ? sv : 0.0) + toRefraction;  // from the crossing
+            if (sv < 0 && sRefraction < 0) return 0.0;                        // a refraction between v and the focal plane
+            if (!(sv < sRefraction)) return 0.0;                              // v above the refraction
+            const int focalMedium = mediumAt(scene, focal, axis);
+            const BentLine bent = imaging.collectionLine(scene, focal, focalMedium, w);
+            if (!bent.open || !bent.bent()) return 0.0;
+            const double rest = quadratureTransmittance(scene, bent, wl, 0.5, 1)[0];
+            if (!(rest > 0)) return 0.0;
+            const double toSurface = sRefraction - sv;
+            return rest * tracer.transmittance(v, v + w * std::max(0.0, toSurface - 1e-7), medium, wl, *rng)[0];
+        }
+        void scattered(const Photon& ph, const Vec3& p) override { image(ph, p, &scene.media[static_cast<size_t>(ph.medium)].phase()); }
+        void reemitted(const Photon& ph, const Vec3& p) override { image(ph, p, nullptr); }
+    };
+
+    // With a field, the photons leave the dye cells of media whose dye lies in grids (the computed emission
+    // and the field-lit one); the lattice's points carry the computed emission of other media, if any.
+    std::optional<DyeCells> fieldLit;
+    if (field && !field->fields().empty()) {
+        fieldLit.emplace(scene, tracer, *field, tracer.lineWavelengths(), detection);
+        if (fieldLit->empty()) fieldLit.reset();
+    }
+    bool latticeNeeded = !fieldLit;
+    for (size_t m = 0; m < scene.media.size() && !latticeNeeded; ++m)
+        latticeNeeded = tracer.fluorescence().active(static_cast<int>(m)) && !(m < fieldLit->media().size() && fieldLit->media()[m]);
+    const uint64_t fieldPhotons = fieldLit ? (latticeNeeded ? options.photons / 2 : options.photons) : 0;
+    const uint64_t latticePhotons = options.photons - fieldPhotons;
+    const uint64_t latticePoints = (latticePhotons + kPhotonsPerPoint - 1) / kPhotonsPerPoint;
+    const uint64_t fieldPoints = (fieldPhotons + kPhotonsPerPoint - 1) / kPhotonsPerPoint;
+    if (fieldLit) out.fieldLitMedia = fieldLit->media();
+    out.fieldLitMedia.resize(scene.media.size(), false);
+    std::atomic<bool> stopped{false};
+    parallelFor(kSlots, threads, [&](size_t s) {
+        Slot& slot = slots[s];
+        Projector projector(scene, tracer, imaging, covered, psf, detection, axis, cosMax, cone, exposureS, options.directions);
+        projector.slot = &slot;
+        projector.margin = psf.cutRadiusMm(scene.spectral.lambdaMax) + 2 * imaging.pixelMm();
+        // Photons leave each source point kPhotonsPerPoint at a time: the point's excitation (a beam
+        // transmittance traced back to where the beam entered) is the costliest part of a photon.
+        const std::vector<double>& lines = tracer.lineWavelengths();
+        std::vector<double> excitation(lines.size()), beyond(lines.size());
+        for (uint64_t i = s, n = 0; i < latticePoints + fieldPoints; i += kSlots, ++n) {
+            if (cancel && (n & 63) == 0 && cancel->load()) {
+                stopped = true;
+                return;
+            }
+            Rng rng = Rng::forKey(seed, key, i);
+            projector.rng = &rng;
+            const bool fromLattice = i < latticePoints;
+            Vec3 p;
+            int medium = kNone;
+            double pdf = 0;
+            if (fromLattice) {
+                const EmissionPoints::Sample y = emission.sample(rng.uniform(), rng.uniform(), rng.uniform(), rng.uniform());
+                if (!(y.pdf > 0) || !covered.computesUnscatteredAt(y.p)) continue;
+                p = y.p;
+                pdf = y.pdf;
+                medium = mediumAt(scene, p, axis);
+                if (out.tracesFieldLit(medium)) continue;  // the dye cells carry that medium's emission
+            } else {
+                const DyeCells::Sample y = fieldLit->sample(rng.uniform(), rng.uniform(), rng.uniform(), rng.uniform());
+                if (!(y.pdf > 0) || mediumAt(scene, y.p, axis) != y.medium) continue;
+                p = y.p;
+                pdf = y.pdf;
+                medium = y.medium;
+            }
+            if (medium == kNone || !tracer.fluorescence().active(medium)) continue;
+            ChannelValues ch;
+            scene.media[static_cast<size_t>(medium)].channelValues(p, ch.data());
+            bool lit = false;
+            // The computed emission (the beams' light inside their cores where the computed part covers p) and,
+            // from the dye cells, the field's light beyond it: its straight light is the photons' too.
+            const bool computed = covered.computesUnscatteredAt(p);
+            for (size_t l = 0; l < lines.size(); ++l) {
+                excitation[l] = computed ? tracer.coreMeanRadiance(p, medium, lines[l], field, rng) : 0.0;
+                beyond[l] = fromLattice ? 0.0 : field->scatteredMeanRadiance(p, lines[l], computed ? 0.0 : 1.0, 1.0).value_or(0.0);
+                lit = excitation[l] + beyond[l] > 0 || lit;
+            }
+            if (!lit) continue;
+            const uint64_t first = fromLattice ? i * kPhotonsPerPoint : (i - latticePoints) * kPhotonsPerPoint;
+            const uint64_t ofKind = fromLattice ? latticePhotons : fieldPhotons;
+            const uint64_t count = std::min<uint64_t>(kPhotonsPerPoint, ofKind - first);
+            for (uint64_t k = 0; k < count; ++k) {
+                double pdfLambda = 0;
+                const double lambda = wavelengths.sample(rng.uniform(), &pdfLambda);
+                double source = 0, straight = 0;  // the emission coefficient at λ (radiance per mm), and what the photons image straight
+                for (size_t l = 0; l < lines.size(); ++l)
+                    if (excitation[l] + beyond[l] > 0) {
+                        const double k = tracer.fluorescence().kernel(medium, ch.data(), lines[l], lambda);
+                        source += k * (excitation[l] + beyond[l]);
+                        straight += k * beyond[l];
+                    }
+                if (!(source > 0) || !(pdfLambda > 0)) continue;
+                // Power per unit of the scene's radiance scale: 4π × the emission coefficient × the volume, with
+                // lengths across the ray in m (as the camera paths' étendue has them) and along it in mm.
+                Photon ph;
+                ph.ray = Ray{p, sampleUniformSphere(rng.uniform(), rng.uniform())};
+                ph.medium = medium;
+                ph.lambda = lambda;
+                ph.weight = 4 * kPi * source * 1e-6 / (pdf * pdfLambda * static_cast<double>(ofKind));
+                projector.specularEvents = 0;
+                // The field-lit emission's straight light is the photons' too (the computed image holds the rest).
+                if (straight > 0) {
+                    Photon direct = ph;
+                    direct.weight *= straight / source;
+                    projector.image(direct, p, nullptr);
+                }
+                walkPhoton(scene, ph, rng, projector, false);
+            }
+        }
+    });
+    out.complete = !stopped;
+    // Each slot's image, its pooled levels spread back to pixels; the estimate is their sum, and kSlots times
+    // each is an independent estimate of it.
+    std::vector<std::vector<double>> slotImages(kSlots, std::vector<double>(pixels, 0.0));
+    parallelFor(kSlots, threads, [&](size_t s) {
+        std::vector<double>& img = slotImages[s];
+        for (int k = 0; k < kImageLevels; ++k) {
+            const std::vector<double>& level = slots[s].level[static_cast<size_t>(k)];
+            if (level.empty()) continue;
+            if (k == 0) {
+                for (size_t i = 0; i < pixels; ++i) img[i] += level[i];
+            } else {
+                const std::vector<double> pooled = poolImage(level, width, height, k);
+                for (size_t i = 0; i < pixels; ++i) img[i] += pooled[i];
+            }
+        }
+    });
+    for (int s = 0; s < kSlots; ++s) {
+        for (size_t i = 0; i < pixels; ++i) out.electrons[i] += slotImages[static_cast<size_t>(s)][i];
+        out.vertices += slots[static_cast<size_t>(s)].vertices;
+        out.deposits += slots[static_cast<size_t>(s)].deposits;
+    }
+    for (int s = 0; s < kSlots; ++s)
+        for (size_t i = 0; i < pixels; ++i) out.variance[i] += sqr(kSlots * slotImages[static_cast<size_t>(s)][i] - out.electrons[i]);
+    for (double& v : out.variance) v /= double(kSlots) * (kSlots - 1);
+    for (std::vector<double>& img : slotImages)
+        for (double& v : img) v *= kSlots;
+    out.slots = std::move(slotImages);
+    out.photons = options.photons;
+    out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return out;
+}
+
+}  // namespace fluorosim::optics

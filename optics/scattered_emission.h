@@ -1,0 +1,63 @@
+#pragma once
+// The computed emission's light that reaches the camera only after scattering, traced forward (docs/model.md,
+// "Scattered emission, traced forward"). Photons leave the points of the computed part's emission (drawn in
+// proportion to the power each cell sends to the camera, at a wavelength drawn from the dyes' detected
+// emission, weighted by the exact emission coefficient there over that density), are traced by analog
+// transport (render/photon_tracer.h: scattering, absorption, re-emission by dyes), and each vertex where they
+// scatter or are re-emitted is imaged as a point source: a few directions of the collection cone, drawn from
+// a mixture of the phase lobe and the cone, each with its transmittance to the objective, landing where the
+// camera paths' geometry puts it and weighed by the PSF's h/h_geo there, so that the photons estimate exactly
+// what the camera paths' connections and branches estimated (those then leave it out:
+// PathStart::computedEmissionTraced). A vertex far from focus is imaged on pooled blocks, as the paths are.
+//
+// Every deposit is bounded (the photon's power over the directions drawn, times at most 2 and the PSF's
+// reweight), so the heavy tails of the camera side's connections, which met a bright neurite along a phase
+// lobe by chance, do not arise.
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+#include "optics/imaging.h"
+#include "optics/unscattered_image.h"
+#include "render/fluence_field.h"
+#include "render/path_tracer.h"
+
+namespace fluorosim::optics {
+
+struct ScatteredEmissionOptions {
+    // Per plane and channel; 0 (the default): the camera paths carry it. 2^19 halves to quarters the camera-noise
+    // median of σs 1–2 /mm tissue at about 1.5 s a plane and channel (docs/performance.md), which would put
+    // README command 1 past its 30 s: it stays an option until the photons are cheaper.
+    uint64_t photons = 0;
+    int directions = 4;                    // per vertex imaged per pixel (pooled vertices take one)
+    void validate() const;                 // ConfigError naming the field and value
+};
+
+struct ScatteredEmissionImage {
+    std::vector<double> electrons;  // expected photoelectrons per pixel (pooled parts spread back to pixels)
+    std::vector<double> variance;   // of each pixel's estimate, from the spread of independent slots
+    // The independent estimates whose mean is `electrons` (each slot's photons, scaled to all of them): a
+    // region's variance follows from their sums over it (the deposits of one photon are correlated across
+    // the pixels its vertices light, which the per-pixel variance does not see).
+    std::vector<std::vector<double>> slots;
+    uint64_t photons = 0, vertices = 0, deposits = 0;
+    // The media whose field-lit emission the photons carry (by index; empty when none).
+    std::vector<bool> fieldLitMedia;
+    bool tracesFieldLit(int medium) const { return medium >= 0 && static_cast<size_t>(medium) < fieldLitMedia.size() && fieldLitMedia[static_cast<size_t>(medium)]; }
+    double seconds = 0;
+    bool complete = true;
+};
+
+// Traces the photons of `emission` (a plane's computed emission) for one plane. `covered` decides which
+// points the computed part holds (CameraPathImaging::computesUnscatteredAt) and how finely a vertex is imaged
+// (imageLevel); `detection` gives photoelectrons per joule at λ. Refracting surfaces on the way to the
+// objective are taken as the camera paths take them (Imaging::cameraStart). The image does not depend on
+// the thread count.
+ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTracer& tracer, const Imaging& imaging, const CameraPathImaging& covered,
+                                              const EmissionPoints& emission, const BeamExcitationField* field,
+                                              const std::function<double(double)>& detection, double exposureS,
+                                              const ScatteredEmissionOptions& options, uint64_t seed, uint64_t streamKey, int threads,
+                                              const std::atomic<bool>* cancel = nullptr);
+
+}  // namespace fluorosim::optics
