@@ -28,7 +28,7 @@ constexpr double kUniformShare = 0.05;
 constexpr double kInvisibleSurvival = 0.5;
 constexpr uint64_t kPhotonsPerPoint = 4;
 // Beyond this distance from the focal plane a vertex's light is a disc wider than 2 × this × tan θ, smooth
-// over many pixels: photons that scatter there go on with probability kFarDepth / |dz|.
+// over many pixels: photons that scatter there go on with probability max(kInvisibleSurvival, kFarDepth / |dz|).
 constexpr double kFarDepthMm = 0.02;
 
 // Wavelengths drawn in proportion to the scene's dyes' emission times the detection, on 1 nm cells.
