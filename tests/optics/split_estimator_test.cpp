@@ -159,6 +159,32 @@ TEST(SplitEstimator, MatchesThePathEstimatorInScatteringTissueWithPathsForTheSca
     expectSameImage(2.0, 1024, 1024, optics::ExcitationFieldOptions{}.photons, 0);
 }
 
+// The traced scattered emission's photons fall into fixed slots, so the image is the same whatever the thread
+// count, and its part of the image is there in scattering tissue.
+TEST(SplitEstimator, TheTracedScatteredEmissionDoesNotDependOnTheThreadCount) {
+    const Scene scene = filamentScene(2.0);
+    optics::ObjectiveOptions objective;
+    objective.na = 0.5;
+    objective.magnification = 6.5 / 1.5;
+    objective.workingDistanceMm = 0.2;
+    optics::BandPassOptions band;
+    band.centreNm = 630;
+    band.fwhmNm = 60;
+    optics::AcquireOptions o;
+    o.spp = 1;
+    o.emission.photons = 1 << 15;
+    std::vector<optics::PlaneImage> images;
+    for (int threads : {1, 2}) {
+        o.threads = threads;
+        images.push_back(optics::renderPlane(scene, objective, optics::FocalPlane{}, optics::Filter::bandPass(band), optics::DetectorOptions{}, kSize,
+                                             kSize, o));
+    }
+    EXPECT_GT(images[0].emissionElectrons, 0.0);
+    EXPECT_EQ(images[0].emissionElectrons, images[1].emissionElectrons);
+    EXPECT_EQ(images[0].electrons, images[1].electrons);
+    EXPECT_EQ(images[0].emissionEstimates, images[1].emissionEstimates);
+}
+
 // Adaptive sampling (AcquireOptions::noiseRatio) decides each pixel's number of paths from pilot paths
 // it then discards, so its mean is that of the fixed-spp estimator; it spends the paths where the
 // noise is, and a target every pixel meets at `spp` changes nothing.
