@@ -13,6 +13,7 @@
 #include "optics/image_pooling.h"
 #include "render/photon_tracer.h"
 #include "render/straight_line.h"
+#include "spectral/wavelength_sampler.h"
 #include "volume/volume_fields.h"
 
 namespace fluorosim::optics {
@@ -31,46 +32,30 @@ constexpr uint64_t kPhotonsPerPoint = 4;
 // over many pixels: photons that scatter there go on with probability max(kInvisibleSurvival, kFarDepth / |dz|).
 constexpr double kFarDepthMm = 0.02;
 
-// Wavelengths drawn in proportion to the scene's dyes' emission times the detection, on 1 nm cells.
-class EmissionWavelengths {
-public:
-    EmissionWavelengths(const Scene& scene, const std::function<double(double)>& detection)
-        : lo_(scene.spectral.lambdaMin), hi_(scene.spectral.lambdaMax) {
-        const int cells = std::max(1, static_cast<int>(std::ceil(hi_ - lo_)));
-        width_ = (hi_ - lo_) / cells;
-        std::vector<double> g(static_cast<size_t>(cells), 0.0);
-        // Each cell's largest value over 9 points across it: a filter's edge inside a cell must not leave the
-        // density far below the detection there (a photon's weight is the detected emission over it).
-        for (int c = 0; c < cells; ++c)
-            for (int k = 0; k <= 8; ++k) {
-                const double l = lo_ + (c + k / 8.0) * width_;
-                double e = 0;
-                for (const Medium& m : scene.media)
-                    for (const DyeComponent& d : m.dyes()) e += d.dye.emissionPdf(l);
-                g[static_cast<size_t>(c)] = std::max(g[static_cast<size_t>(c)], e * std::max(0.0, detection(l)));
-            }
-        double total = 0;
-        for (double v : g) total += v * width_;
-        cdf_.assign(g.size() + 1, 0.0);
-        density_.assign(g.size(), 0.0);
-        for (size_t c = 0; c < g.size(); ++c) {
-            density_[c] = (total > 0 ? (1 - kUniformShare) * g[c] / total : 0.0) + (total > 0 ? kUniformShare : 1.0) / (hi_ - lo_);
-            cdf_[c + 1] = cdf_[c] + density_[c] * width_;
+// The photons' wavelengths: in proportion to the scene's dyes' emission times the detection, on 1 nm cells,
+// each at its largest value over 9 points across it (a filter's edge inside a cell must not leave the density
+// far below the detection there: a photon's weight is the detected emission over it), with kUniformShare
+// spread uniformly so that the density is positive wherever a dye emits.
+WavelengthSampler emissionWavelengths(const Scene& scene, const std::function<double(double)>& detection) {
+    const double lo = scene.spectral.lambdaMin, hi = scene.spectral.lambdaMax;
+    const int cells = std::max(1, static_cast<int>(std::ceil(hi - lo)));
+    const double width = (hi - lo) / cells;
+    std::vector<double> g(static_cast<size_t>(cells), 0.0);
+    for (int c = 0; c < cells; ++c)
+        for (int k = 0; k <= 8; ++k) {
+            const double l = lo + (c + k / 8.0) * width;
+            double e = 0;
+            for (const Medium& m : scene.media)
+                for (const DyeComponent& d : m.dyes()) e += d.dye.emissionPdf(l);
+            g[static_cast<size_t>(c)] = std::max(g[static_cast<size_t>(c)], e * std::max(0.0, detection(l)));
         }
-    }
-    // λ and its density (per nm).
-    double sample(double u, double* pdf) const {
-        const double target = u * cdf_.back();
-        const size_t c = std::min(density_.size() - 1, static_cast<size_t>(std::upper_bound(cdf_.begin(), cdf_.end(), target) - cdf_.begin()) - 1);
-        *pdf = density_[c] / cdf_.back();
-        const double within = density_[c] > 0 ? (target - cdf_[c]) / (density_[c] * width_) : 0.5;
-        return lo_ + (static_cast<double>(c) + std::clamp(within, 0.0, 1.0)) * width_;
-    }
-
-private:
-    double lo_, hi_, width_ = 1;
-    std::vector<double> cdf_, density_;
-};
+    double total = 0;
+    for (double v : g) total += v;
+    for (double& v : g) v = (total > 0 ? (1 - kUniformShare) * v / total : 0.0) + (total > 0 ? kUniformShare : 1.0) / cells;
+    WavelengthSampler sampler(lo, hi, {}, true);
+    sampler.setContinuousDensity(std::move(g));
+    return sampler;
+}
 
 uint64_t blockKey(int medium, int64_t x, int64_t y, int64_t z) {
     auto part = [](int64_t v) { return static_cast<uint64_t>(v + (1 << 19)) & 0xFFFFF; };
@@ -211,7 +196,6 @@ public:
         cells_ = std::move(cells);
     }
     bool empty() const { return cells_.empty(); }
-    size_t cells() const { return cells_.size(); }
     const std::vector<bool>& media() const { return media_; }
     struct Sample {
         Vec3 p;
@@ -261,17 +245,16 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
     out.variance.assign(pixels, 0.0);
     if (options.photons == 0 || emission.empty()) return out;
     requireMemory(8.0 * kImageLevels * kSlots * static_cast<double>(pixels), "the scattered emission's images");
-    const EmissionWavelengths wavelengths(scene, detection);
+    const WavelengthSampler wavelengths = emissionWavelengths(scene, detection);
     const WidefieldPsf& psf = imaging.psf();
     const Vec3 axis = imaging.axis();
     const double cosMax = imaging.cosMax(), cone = imaging.coneSolidAngle();
-    const double photons = static_cast<double>(options.photons);
     const uint64_t key = mixBits(streamKey + 0x656d697373696f6eULL);
 
     // Per slot and image level, the sum of the deposits on each pixel (levels allocated when first used).
     struct Slot {
         std::array<std::vector<double>, kImageLevels> level;
-        uint64_t vertices = 0, deposits = 0;
+        uint64_t vertices = 0;
     };
     std::vector<Slot> slots(kSlots);
 
@@ -296,8 +279,7 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
 
         // Whether light leaving v toward the objective can land on the image: within the defocus disc's
         // radius and the PSF displacement's cut of the field.
-        bool visible(const Vec3& v) const {
-            const Imaging::Local l = imaging.local(v);
+        bool visible(const Imaging::Local& l) const {
             const double reach = std::abs(l.dz) * imaging.tanThetaMax() + margin;
             const double ox = std::max(0.0, std::abs(l.x) - 0.5 * width * imaging.pixelMm());
             const double oy = std::max(0.0, std::abs(l.y) - 0.5 * height * imaging.pixelMm());
@@ -308,16 +290,18 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
         int specularEvents = 0;
         double specularSurvival(const Photon&) override { return ++specularEvents > 8 ? 0.95 : 1.0; }
         double survival(const Photon&, const Vec3& p) override {
-            if (!visible(p)) return kInvisibleSurvival;
-            const double dz = std::abs(imaging.local(p).dz);
+            const Imaging::Local l = imaging.local(p);
+            if (!visible(l)) return kInvisibleSurvival;
+            const double dz = std::abs(l.dz);
             return dz > kFarDepthMm ? std::max(kInvisibleSurvival, kFarDepthMm / dz) : 1.0;
         }
 
         void image(const Photon& ph, const Vec3& v, const HenyeyGreenstein* phase) {
             if (!(ph.weight > 0) || ph.medium == kNone) return;
             ++slot->vertices;
-            if (!visible(v)) return;
-            const double dz = imaging.local(v).dz;
+            const Imaging::Local lv = imaging.local(v);
+            if (!visible(lv)) return;
+            const double dz = lv.dz;
             const double toFront = imaging.workingDistanceMm() - dz;
             if (!(toFront > 0)) return;
             const int level = std::clamp(covered.imageLevel(v), 0, kImageLevels - 1);
@@ -355,7 +339,7 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
                 // in-focus PSF's displacement, weighed there by h/h_geo.
                 double radius = 0;
                 const Vec3 x = focal - imaging.displacement(rng->uniform(), rng->uniform(), ph.lambda, &radius);
-                const Imaging::Local lx = imaging.local(x), lv = imaging.local(v);
+                const Imaging::Local lx = imaging.local(x);
                 const double col = std::floor((lx.x - imaging.leftMm()) / imaging.pixelMm());
                 const double row = std::floor((imaging.topMm() - lx.y) / imaging.pixelMm());
                 if (!(col >= 0 && col < width && row >= 0 && row < height)) continue;
@@ -363,7 +347,6 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
                 const double e = exposureS * det * ph.weight * (f / q) * T * R / n;
                 if (!std::isfinite(e)) continue;
                 img[static_cast<size_t>(row) * width + static_cast<size_t>(col)] += e;
-                ++slot->deposits;
             }
         }
         // Transmittance from v along w (sv from the focal-plane crossing, `reach` to the objective's front) as
@@ -461,14 +444,14 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
             const uint64_t ofKind = fromLattice ? latticePhotons : fieldPhotons;
             const uint64_t count = std::min<uint64_t>(kPhotonsPerPoint, ofKind - first);
             for (uint64_t k = 0; k < count; ++k) {
-                double pdfLambda = 0;
-                const double lambda = wavelengths.sample(rng.uniform(), &pdfLambda);
+                const SampledWavelengths drawn = wavelengths.sample(0.0, rng.uniform());
+                const double lambda = drawn.lambda[0], pdfLambda = drawn.pdf[0];
                 double source = 0, straight = 0;  // the emission coefficient at λ (radiance per mm), and what the photons image straight
                 for (size_t l = 0; l < lines.size(); ++l)
                     if (excitation[l] + beyond[l] > 0) {
-                        const double k = tracer.fluorescence().kernel(medium, ch.data(), lines[l], lambda);
-                        source += k * (excitation[l] + beyond[l]);
-                        straight += k * beyond[l];
+                        const double kernel = tracer.fluorescence().kernel(medium, ch.data(), lines[l], lambda);
+                        source += kernel * (excitation[l] + beyond[l]);
+                        straight += kernel * beyond[l];
                     }
                 if (!(source > 0) || !(pdfLambda > 0)) continue;
                 // Power per unit of the scene's radiance scale: 4π × the emission coefficient × the volume, with
@@ -509,7 +492,6 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
     for (int s = 0; s < kSlots; ++s) {
         for (size_t i = 0; i < pixels; ++i) out.electrons[i] += slotImages[static_cast<size_t>(s)][i];
         out.vertices += slots[static_cast<size_t>(s)].vertices;
-        out.deposits += slots[static_cast<size_t>(s)].deposits;
     }
     for (int s = 0; s < kSlots; ++s)
         for (size_t i = 0; i < pixels; ++i) out.variance[i] += sqr(kSlots * slotImages[static_cast<size_t>(s)][i] - out.electrons[i]);

@@ -41,7 +41,7 @@ struct ScatteredEmissionImage {
     // region's variance follows from their sums over it (the deposits of one photon are correlated across
     // the pixels its vertices light, which the per-pixel variance does not see).
     std::vector<std::vector<double>> slots;
-    uint64_t photons = 0, vertices = 0, deposits = 0;
+    uint64_t photons = 0, vertices = 0;
     // The media whose field-lit emission the photons carry (by index; empty when none).
     std::vector<bool> fieldLitMedia;
     bool tracesFieldLit(int medium) const { return medium >= 0 && static_cast<size_t>(medium) < fieldLitMedia.size() && fieldLitMedia[static_cast<size_t>(medium)]; }
