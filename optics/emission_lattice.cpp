@@ -14,6 +14,7 @@
 #include "core/memory_cap.h"
 #include "core/parallel.h"
 #include "core/quadrature.h"
+#include "optics/index_key.h"
 #include "render/straight_line.h"
 
 namespace fluorosim::optics {
@@ -21,14 +22,6 @@ namespace {
 
 int64_t floorDiv(int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
-// Three integer coordinates within ±2^20 as one key.
-uint64_t packKey(int64_t i, int64_t j, int64_t k) {
-    return (static_cast<uint64_t>(i + (1 << 20)) << 42) | (static_cast<uint64_t>(j + (1 << 20)) << 21) | static_cast<uint64_t>(k + (1 << 20));
-}
-std::array<int64_t, 3> unpackKey(uint64_t k) {
-    return {static_cast<int64_t>(k >> 42) - (1 << 20), static_cast<int64_t>((k >> 21) & 0x1FFFFF) - (1 << 20),
-            static_cast<int64_t>(k & 0x1FFFFF) - (1 << 20)};
-}
 
 struct Box {
     double x0 = 1e300, x1 = -1e300, y0 = 1e300, y1 = -1e300, z0 = 1e300, z1 = -1e300;
@@ -160,13 +153,13 @@ EmissionLattice::EmissionLattice(const Scene& scene, const ChannelDyes& dyes, co
                 if (!(maxValue > 0)) return;
                 for (int64_t cz = box.lo[2] >> 3; cz <= box.hi[2] >> 3; ++cz)
                     for (int64_t cy = box.lo[1] >> 3; cy <= box.hi[1] >> 3; ++cy)
-                        for (int64_t cx = box.lo[0] >> 3; cx <= box.hi[0] >> 3; ++cx) blocks.insert(packKey(cx, cy, cz));
+                        for (int64_t cx = box.lo[0] >> 3; cx <= box.hi[0] >> 3; ++cx) blocks.insert(packIndexKey(cx, cy, cz));
             });
         }
         std::vector<uint64_t> sorted(blocks.begin(), blocks.end());
         std::sort(sorted.begin(), sorted.end());
         for (uint64_t k : sorted) {
-            const auto b = unpackKey(k);
+            const auto b = unpackIndexKey(k);
             blockTasks.push_back({static_cast<int>(med), b[0], b[1], b[2]});
         }
     }
@@ -216,7 +209,7 @@ EmissionLattice::EmissionLattice(const Scene& scene, const ChannelDyes& dyes, co
         // voxels are all zero reads zero everywhere. A cell belongs to the smallest active block among
         // its corners' blocks, so that each node is visited once.
         const std::unordered_set<uint64_t>& active = activeBlocks[static_cast<size_t>(bt.medium)];
-        const uint64_t self = packKey(b[0], b[1], b[2]);
+        const uint64_t self = packIndexKey(b[0], b[1], b[2]);
         const Affine& fromWorld = volume.indexFromWorld();
         const Affine& toWorld = volume.worldFromIndex();
         const double volumeMm3 = latt * latt * g.axialMm;
@@ -244,7 +237,7 @@ EmissionLattice::EmissionLattice(const Scene& scene, const ChannelDyes& dyes, co
                     if (!nearest) {
                         bool mine = true;
                         for (int c = 0; c < 8 && mine; ++c) {
-                            const uint64_t k = packKey(floorDiv(gi + (c & 1), 8), floorDiv(gj + ((c >> 1) & 1), 8), floorDiv(gk + ((c >> 2) & 1), 8));
+                            const uint64_t k = packIndexKey(floorDiv(gi + (c & 1), 8), floorDiv(gj + ((c >> 1) & 1), 8), floorDiv(gk + ((c >> 2) & 1), 8));
                             mine = !(k < self && active.count(k));
                         }
                         if (!mine) continue;
@@ -453,13 +446,13 @@ EmissionLattice::EmissionLattice(const Scene& scene, const ChannelDyes& dyes, co
         for (const auto& chunk : chunks)
             for (const Candidate& s : chunk)
                 if (!s.fromColumn)
-                    columnMedia.emplace(packKey(std::llround((s.point.x - xLeft) / latt - 0.5), std::llround((yTop - s.point.y) / latt - 0.5), 0),
+                    columnMedia.emplace(packIndexKey(std::llround((s.point.x - xLeft) / latt - 0.5), std::llround((yTop - s.point.y) / latt - 0.5), 0),
                                         std::vector<RaySegment>{});
         std::vector<uint64_t> keys;
         for (const auto& kv : columnMedia) keys.push_back(kv.first);
         std::vector<std::vector<RaySegment>> media(keys.size());
         parallelFor(keys.size(), threads, [&](size_t n) {
-            const auto ij = unpackKey(keys[n]);
+            const auto ij = unpackIndexKey(keys[n]);
             const Vec3 top = g.world(g.columnX(static_cast<int>(ij[0])), g.columnY(static_cast<int>(ij[1])), zHigh);
             const int medium0 = mediumAt(scene, top, g.axis);
             media[n] = traceStraightLine(scene, Ray{top, -g.axis}, medium0, 0.0, zHigh - zLow, LineSurfaces::ThroughAll).segments;
@@ -474,7 +467,7 @@ EmissionLattice::EmissionLattice(const Scene& scene, const ChannelDyes& dyes, co
                     kept.push_back(std::move(s));
                     continue;
                 }
-                const auto it = columnMedia.find(packKey(std::llround((s.point.x - xLeft) / latt - 0.5), std::llround((yTop - s.point.y) / latt - 0.5), 0));
+                const auto it = columnMedia.find(packIndexKey(std::llround((s.point.x - xLeft) / latt - 0.5), std::llround((yTop - s.point.y) / latt - 0.5), 0));
                 const double t = zHigh - s.point.z;
                 for (const RaySegment& seg : it->second)
                     if (t >= seg.t0 && t < seg.t1) {

@@ -11,6 +11,7 @@
 #include "core/rng.h"
 #include "core/sampling.h"
 #include "optics/image_pooling.h"
+#include "optics/index_key.h"
 #include "render/photon_tracer.h"
 #include "render/straight_line.h"
 #include "spectral/wavelength_sampler.h"
@@ -55,11 +56,6 @@ WavelengthSampler emissionWavelengths(const Scene& scene, const std::function<do
     WavelengthSampler sampler(lo, hi, {}, true);
     sampler.setContinuousDensity(std::move(g));
     return sampler;
-}
-
-uint64_t blockKey(int medium, int64_t x, int64_t y, int64_t z) {
-    auto part = [](int64_t v) { return static_cast<uint64_t>(v + (1 << 19)) & 0xFFFFF; };
-    return (static_cast<uint64_t>(medium) << 60) ^ (part(x) << 40) ^ (part(y) << 20) ^ part(z);
 }
 
 // The dye in the excitation field's box, in media whose every dye lies in grids: the index cells of the
@@ -121,15 +117,14 @@ public:
                     if (!(maxValue > 0)) return;
                     for (int64_t bz = (box.lo[2] >> 3) - 1; bz <= box.hi[2] >> 3; ++bz)
                         for (int64_t by = (box.lo[1] >> 3) - 1; by <= box.hi[1] >> 3; ++by)
-                            for (int64_t bx = (box.lo[0] >> 3) - 1; bx <= box.hi[0] >> 3; ++bx) blocks[blockKey(static_cast<int>(m), bx, by, bz)] = true;
+                            for (int64_t bx = (box.lo[0] >> 3) - 1; bx <= box.hi[0] >> 3; ++bx) blocks[packIndexKey(bx, by, bz)] = true;
                 });
             const double cellMm3 = std::abs(volume->worldFromIndex().determinant());
             std::vector<uint64_t> keys;
             for (const auto& [key, unused] : blocks) keys.push_back(key);
             std::sort(keys.begin(), keys.end());  // the same cells in the same order whatever the grid's block order
             for (uint64_t key : keys) {
-                const int64_t b[3] = {static_cast<int64_t>((key >> 40) & 0xFFFFF) - (1 << 19), static_cast<int64_t>((key >> 20) & 0xFFFFF) - (1 << 19),
-                                      static_cast<int64_t>(key & 0xFFFFF) - (1 << 19)};
+                const std::array<int64_t, 3> b = unpackIndexKey(key);
                 bool inBox = false;
                 for (int a = 0; a < 8 && !inBox; ++a)
                     inBox = field.contains(volume->worldFromIndex().apply(
@@ -138,8 +133,8 @@ public:
                 // The voxels [8b, 8b + 8] on each axis: the corners of the block's cells.
                 IndexBox range;
                 for (int a = 0; a < 3; ++a) {
-                    range.lo[static_cast<size_t>(a)] = static_cast<int32_t>(8 * b[a]);
-                    range.hi[static_cast<size_t>(a)] = static_cast<int32_t>(8 * b[a] + 8);
+                    range.lo[static_cast<size_t>(a)] = static_cast<int32_t>(8 * b[static_cast<size_t>(a)]);
+                    range.hi[static_cast<size_t>(a)] = static_cast<int32_t>(8 * b[static_cast<size_t>(a)] + 8);
                 }
                 // The beams' attenuation at the block's centre: the sheet's profile is evaluated per cell, its
                 // attenuation varies on the block's scale.
@@ -226,9 +221,17 @@ private:
 }  // namespace
 
 void ScatteredEmissionOptions::validate() const {
-    if (photons == 1 || photons > (uint64_t(1) << 40))
-        throw ConfigError("scattered emission photons must be 0 or lie in [2, 2^40], got " + std::to_string(photons));
+    if (photons && (*photons == 1 || *photons > (uint64_t(1) << 40)))
+        throw ConfigError("scattered emission photons must be 0 or lie in [2, 2^40], got " + std::to_string(*photons));
+    if (!(photonsPerPixel >= 0) || photonsPerPixel > 1e6)
+        throw ConfigError("scattered emission photons per pixel must lie in [0, 10^6], got " + std::to_string(photonsPerPixel));
     if (directions < 1 || directions > 1024) throw ConfigError("scattered emission directions per vertex must lie in [1, 1024], got " + std::to_string(directions));
+}
+
+uint64_t ScatteredEmissionOptions::photonsFor(size_t pixels) const {
+    if (photons) return *photons;
+    const double n = std::round(photonsPerPixel * static_cast<double>(pixels));
+    return n < 2 ? (n > 0 ? 2 : 0) : static_cast<uint64_t>(std::min(n, double(uint64_t(1) << 40)));
 }
 
 ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTracer& tracer, const Imaging& imaging, const CameraPathImaging& covered,
@@ -243,7 +246,8 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
     const size_t pixels = static_cast<size_t>(width) * height;
     out.electrons.assign(pixels, 0.0);
     out.variance.assign(pixels, 0.0);
-    if (options.photons == 0 || emission.empty()) return out;
+    const uint64_t photons = options.photonsFor(pixels);
+    if (photons == 0 || emission.empty()) return out;
     requireMemory(8.0 * kImageLevels * kSlots * static_cast<double>(pixels), "the scattered emission's images");
     const WavelengthSampler wavelengths = emissionWavelengths(scene, detection);
     const WidefieldPsf& psf = imaging.psf();
@@ -386,8 +390,8 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
     bool latticeNeeded = !fieldLit;
     for (size_t m = 0; m < scene.media.size() && !latticeNeeded; ++m)
         latticeNeeded = tracer.fluorescence().active(static_cast<int>(m)) && !(m < fieldLit->media().size() && fieldLit->media()[m]);
-    const uint64_t fieldPhotons = fieldLit ? (latticeNeeded ? options.photons / 2 : options.photons) : 0;
-    const uint64_t latticePhotons = options.photons - fieldPhotons;
+    const uint64_t fieldPhotons = fieldLit ? (latticeNeeded ? photons / 2 : photons) : 0;
+    const uint64_t latticePhotons = photons - fieldPhotons;
     const uint64_t latticePoints = (latticePhotons + kPhotonsPerPoint - 1) / kPhotonsPerPoint;
     const uint64_t fieldPoints = (fieldPhotons + kPhotonsPerPoint - 1) / kPhotonsPerPoint;
     if (fieldLit) out.fieldLitMedia = fieldLit->media();
@@ -499,7 +503,7 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
     for (std::vector<double>& img : slotImages)
         for (double& v : img) v *= kSlots;
     out.slots = std::move(slotImages);
-    out.photons = options.photons;
+    out.photons = photons;
     out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return out;
 }

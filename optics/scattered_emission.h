@@ -16,6 +16,7 @@
 #include <atomic>
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <vector>
 
 #include "optics/imaging.h"
@@ -26,10 +27,12 @@
 namespace fluorosim::optics {
 
 struct ScatteredEmissionOptions {
-    // Per plane and channel; 0 (the default): the camera paths carry it. 2^19 halves to quarters the camera-noise
-    // median of σs 1–2 /mm tissue at about 1.5 s a plane and channel (docs/performance.md), which would put
-    // README command 1 past its 30 s: it stays an option until the photons are cheaper.
-    uint64_t photons = 0;
+    // Photons per plane and channel: `photons` when set (0: the camera paths carry it), else photonsPerPixel times
+    // the plane's pixels. The default, 8 (2^19 on a 256² plane), cuts the camera-noise median of the brightest
+    // tenth in σs 1–2 /mm tissue 2–6-fold for about 1.2 s a 256² plane and channel (docs/performance.md).
+    std::optional<uint64_t> photons;
+    double photonsPerPixel = 8;
+    uint64_t photonsFor(size_t pixels) const;
     int directions = 4;                    // per vertex imaged per pixel (pooled vertices take one)
     void validate() const;                 // ConfigError naming the field and value
 };

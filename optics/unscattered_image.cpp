@@ -9,6 +9,7 @@
 #include "core/errors.h"
 #include "core/math.h"
 #include "core/parallel.h"
+#include "optics/index_key.h"
 #include "render/beam_core.h"
 
 namespace fluorosim::optics {
@@ -17,10 +18,6 @@ namespace {
 constexpr double kUmPerMm = 1e3;
 constexpr size_t kMaxBeamLines = 32;
 
-// Three integer coordinates within ±2^20 as one key.
-uint64_t packKey(int64_t i, int64_t j, int64_t k) {
-    return (static_cast<uint64_t>(i + (1 << 20)) << 42) | (static_cast<uint64_t>(j + (1 << 20)) << 21) | static_cast<uint64_t>(k + (1 << 20));
-}
 
 double secondsSince(std::chrono::steady_clock::time_point t) { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count(); }
 
@@ -61,7 +58,7 @@ EmissionPoints::EmissionPoints(const Imaging& plane, double x0, double yTop, dou
     : right_(plane.world(1, 0, 0) - plane.world(0, 0, 0)), up_(plane.world(0, 1, 0) - plane.world(0, 0, 0)), axis_(plane.axis()),
       centre_(plane.centre()), x0_(x0), yTop_(yTop), z0_(z0), lateral_(lateralMm), axial_(axialMm) {}
 
-uint64_t EmissionPoints::key(int64_t i, int64_t j, int64_t l) const { return packKey(i, j, l); }
+uint64_t EmissionPoints::key(int64_t i, int64_t j, int64_t l) const { return packIndexKey(i, j, l); }
 
 void EmissionPoints::add(int64_t i, int64_t j, int64_t layer, double power) {
     if (power > 0) pending_.push_back({key(i, j, layer), power});
