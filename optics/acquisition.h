@@ -43,8 +43,11 @@ std::optional<Estimator> estimatorFromName(const std::string& name);
 // from the focal plane; the computed image adds the dye it excites there, and paths look it up instead of
 // tracing excitation sub-paths wherever it reaches.
 struct ExcitationFieldOptions {
-    uint64_t photons = 50000;   // per beam line side and plane; 0: the paths estimate the scattered excitation
-    double lateralUm = 4;       // node spacing along the focal plane
+    uint64_t photons = 200000;  // per beam line side and plane; 0: the paths estimate the scattered excitation
+    // Node spacing along the focal plane; 0 (the default) chooses it: 16 or 8 um where the sheets' light per
+    // unit height is flat over the box and that spacing is at most a tenth of the scattering length, else 4 um
+    // (docs/model.md, "The excitation field").
+    double lateralUm = 0;
     double axialUm = 0.5;       // node spacing along the axis (across a light sheet)
     double halfDepthUm = 20;    // how far from the focal plane it reaches (at least the computed region)
     void validate() const;      // ConfigError naming the option and value
@@ -71,7 +74,8 @@ struct AcquireOptions {
     int pilotSpp = 16;
     uint64_t seed = 1;
     // Tally the paths' re-emissions by label (PlaneImage::labelledElectrons, `labelCount` keys), pooled as
-    // the total is: for fits of the scattered light.
+    // the total is: for fits of the scattered light. The scattered emission is then left to the paths (the
+    // traced photons are not split by label).
     const EmissionLabels* labels = nullptr;
     int labelCount = 0;
     int threads = 0;  // 0: all cores
@@ -102,6 +106,7 @@ struct PlaneImage {
     // stderrElectrons does not hold).
     uint64_t fieldPhotons = 0;
     double fieldSeconds = 0, fieldElectrons = 0;
+    double fieldLateralSpacingUm = 0;  // the node spacing along the focal plane (0: no field)
     std::vector<double> fieldHalfDifference;
     // The computed emission's scattered light traced forward (AcquireOptions::emission): its photons, their
     // vertices imaged, its time and its photoelectrons summed over pixels (in `electrons`, its variance in

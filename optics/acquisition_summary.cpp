@@ -62,6 +62,8 @@ std::string AcquisitionSummary::addPlane(size_t slot, int plane, const PlaneImag
     fieldPhotons_ += image.fieldPhotons;
     fieldSeconds_ += image.fieldSeconds;
     fieldSum_ += image.fieldElectrons;
+    if (image.fieldLateralSpacingUm > 0)
+        fieldSpacingUm_ = fieldSpacingUm_ > 0 ? std::min(fieldSpacingUm_, image.fieldLateralSpacingUm) : image.fieldLateralSpacingUm;
     emissionPhotons_ += image.emissionPhotons;
     emissionVertices_ += image.emissionVertices;
     emissionSeconds_ += image.emissionSeconds;
@@ -73,12 +75,30 @@ std::string AcquisitionSummary::addPlane(size_t slot, int plane, const PlaneImag
     std::vector<double> sorted = image.electrons;
     std::sort(sorted.begin(), sorted.end());
     const double cut = sorted[static_cast<size_t>(0.9 * static_cast<double>(sorted.size() - 1))];
+    const double cut1 = sorted[static_cast<size_t>(0.99 * static_cast<double>(sorted.size() - 1))];
+    const bool traced = image.emissionEstimates.size() >= 2;
+    const size_t halfSlots = image.emissionEstimates.size() / 2;
     for (size_t i = 0; i < image.electrons.size(); ++i)
         if (image.electrons[i] >= cut) {
-            mcOverCamera_.push_back(sqr(image.stderrElectrons[i]) / (std::max(0.0, image.electrons[i]) + darkElectrons_ + sqr(readNoise_)));
+            const double camera = std::max(0.0, image.electrons[i]) + darkElectrons_ + sqr(readNoise_);
+            mcOverCamera_.push_back(sqr(image.stderrElectrons[i]) / camera);
             if (image.electrons[i] > 0) pathRel_.push_back(image.stderrElectrons[i] / image.electrons[i]);
-            if (!image.fieldHalfDifference.empty())
-                fieldOverCamera_.push_back(sqr(image.fieldHalfDifference[i]) / (std::max(0.0, image.electrons[i]) + darkElectrons_ + sqr(readNoise_)));
+            if (!image.fieldHalfDifference.empty()) fieldOverCamera_.push_back(sqr(image.fieldHalfDifference[i]) / camera);
+            std::array<std::optional<double>, kBudgetParts> part;
+            if (!image.fieldHalfDifference.empty()) part[kFieldPart] = sqr(image.fieldHalfDifference[i]);
+            double pathVariance = sqr(image.stderrElectrons[i]);
+            if (traced) {
+                double a = 0, b = 0;  // the two halves of the slots, each an estimate of the traced image
+                for (size_t s = 0; s < 2 * halfSlots; ++s) (s < halfSlots ? a : b) += image.emissionEstimates[s][i] / double(halfSlots);
+                part[kTracedPart] = sqr(0.5 * (a - b));
+                if (!image.emissionVariance.empty()) pathVariance = std::max(0.0, pathVariance - image.emissionVariance[i]);
+            }
+            if (options_.spp > 1 || options_.noiseRatio) part[kPathsPart] = pathVariance;  // one path says nothing of its spread
+            for (int k = 0; k < kBudgetParts; ++k) {
+                if (!part[static_cast<size_t>(k)]) continue;
+                budget_[static_cast<size_t>(k)][0].push_back(*part[static_cast<size_t>(k)] / camera);
+                if (image.electrons[i] >= cut1) budget_[static_cast<size_t>(k)][1].push_back(*part[static_cast<size_t>(k)] / camera);
+            }
         }
     double signal = 0;
     for (double e : image.electrons) signal += e;
@@ -121,6 +141,7 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
         {"excitation_field", "photons", double(fieldPhotons_), false, true},
         {"excitation_field", "seconds", fieldSeconds_},
         {"excitation_field", "electrons_fraction", fieldSum_ / total},
+        {"excitation_field", "lateral_spacing_um", fieldSpacingUm_, !(fieldSpacingUm_ > 0)},
         // Its noise (correlated across pixels; from the field's two halves) over the camera's, brightest 10 %.
         {"excitation_field", "median_noise_over_camera_variance_top10", median(fieldOverCamera_), fieldOverCamera_.empty()},
         // The computed emission's scattered light, traced forward from its points (split estimator).
@@ -128,6 +149,14 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
         {"scattered_emission", "vertices", double(emissionVertices_), false, true},
         {"scattered_emission", "seconds", emissionSeconds_},
         {"scattered_emission", "electrons_fraction", emissionSum_ / total},
+        // The noise budget: each part's median noise variance over the camera's (docs/performance.md, "Where
+        // the noise comes from").
+        {"noise_budget", "excitation_field_top10", median(budget_[kFieldPart][0]), budget_[kFieldPart][0].empty()},
+        {"noise_budget", "excitation_field_top1", median(budget_[kFieldPart][1]), budget_[kFieldPart][1].empty()},
+        {"noise_budget", "scattered_emission_top10", median(budget_[kTracedPart][0]), budget_[kTracedPart][0].empty()},
+        {"noise_budget", "scattered_emission_top1", median(budget_[kTracedPart][1]), budget_[kTracedPart][1].empty()},
+        {"noise_budget", "paths_top10", median(budget_[kPathsPart][0]), budget_[kPathsPart][0].empty()},
+        {"noise_budget", "paths_top1", median(budget_[kPathsPart][1]), budget_[kPathsPart][1].empty()},
         {"", "median_relative_stderr_top10", median(pathRel_)},
         {"", "non_finite_samples", double(nonFinite_), false, true},
         {"", "largest_sample_over_pixel", largestOverPixel_},

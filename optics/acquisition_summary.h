@@ -2,6 +2,7 @@
 // What an acquisition reports about itself, accumulated plane by plane: the numbers of `fluorosim
 // acquire`'s JSON summary and of the Python result's "summary", and the warnings about the result (a
 // plane without signal, a missed noise target, saturated pixels). One place, so that both say the same.
+#include <array>
 #include <optional>
 #include <string>
 #include <vector>
@@ -54,10 +55,16 @@ private:
     // The excitation field: photons, seconds, the electrons its scattered light excites, and over the
     // brightest pixels its noise variance (from its two halves) over the camera's.
     uint64_t fieldPhotons_ = 0;
-    double fieldSeconds_ = 0, fieldSum_ = 0;
+    double fieldSeconds_ = 0, fieldSum_ = 0, fieldSpacingUm_ = 0;  // the finest lateral spacing of any plane's field
     uint64_t emissionPhotons_ = 0, emissionVertices_ = 0;
     double emissionSeconds_ = 0, emissionSum_ = 0;
     std::vector<double> fieldOverCamera_;
+    // The noise budget: each part's own noise variance over the camera's, per pixel, over the brightest 10 %
+    // and 1 % of each plane's pixels ([part][0] and [part][1]). The field's and the traced emission's from
+    // half the difference of their two halves (one degree of freedom, as two seeds give it), the paths'
+    // from their samples' spread.
+    enum BudgetPart { kFieldPart, kTracedPart, kPathsPart, kBudgetParts };
+    std::array<std::array<std::vector<double>, 2>, kBudgetParts> budget_;
 };
 
 }  // namespace fluorosim::optics

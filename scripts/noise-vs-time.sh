@@ -5,9 +5,12 @@
 # the brightest 10 % of pixels, the measure, and over the brightest 1 %: the neurites cover only
 # a few per cent of the field, so in clear tissue the brightest 10 % include pixels with no signal at
 # all, equal in both renders). Tissues: clear, the sample's (sigma_s 1 /mm), sigma_s 2 /mm and uncleared
-# cortex (sigma_s 20 /mm, g 0.9); estimators: split with the excitation field and camera paths carrying
-# the scattered emission (the default), split with the scattered emission traced forward from the computed
-# and field-lit emission (--emission-photons 524288), and that adaptively.
+# cortex (sigma_s 20 /mm, g 0.9). Estimators: camera paths carrying the scattered emission with the field
+# at 50 000 photons (--emission-photons 0 --field-photons 50000, 4 paths per pixel: the default until the
+# thirteenth session); the default (the scattered emission traced forward, 2^19 photons per plane and
+# channel, the field at 200 000, 2 paths per pixel as README command 1 runs); the default adaptively.
+# The last three columns give the first seed's noise budget (the summary's `noise_budget`: each part's own
+# median noise variance over the camera's, brightest 10 % / brightest 1 %).
 # Usage: scripts/noise-vs-time.sh [build/apps/fluorosim] > table.md
 # Needs samples/neurons/neurons.vdb (samples/neurons/make_volume.sh) and python3-numpy/-tifffile.
 set -euo pipefail
@@ -34,8 +37,8 @@ PY
 tissue "0 /mm" "$work/clear.json"
 tissue "2 /mm" "$work/s2.json"
 tissue "20 /mm" "$work/cortex.json"
-echo "| tissue | estimator | paths per pixel | seconds per plane (2 channels) | median MC / shot variance, top 10 % | top 1 % | relative RMS MC error, top 1 % | sum ratio | largest sample / pixel | field noise / shot, top 10 % | tracing the scattered emission (s per channel) |"
-echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+echo "| tissue | estimator | paths per pixel | seconds per plane (2 channels) | median MC / shot variance, top 10 % | top 1 % | relative RMS MC error, top 1 % | sum ratio | largest sample / pixel | budget: field, top 10 % / 1 % | budget: traced emission | budget: paths |"
+echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
 run() {  # tissue scene label spp [more acquire options]
     local tag=$1 file=$2 est=$3 spp=$4
     shift 4
@@ -54,16 +57,18 @@ s = [json.load(open(f"{work}/{seed}.json")) for seed in (1, 2)]
 seconds = sum(x["seconds"] for x in s) / 2
 paths = f"{sum(x['mean_path_spp'] for x in s) / 2:.1f} (adaptive)" if "noise-ratio" in extra else spp
 largest = max(x["largest_sample_over_pixel"] for x in s)
-f = [x["excitation_field"]["median_noise_over_camera_variance_top10"] for x in s]
-field = "-" if f[0] is None else f"{sum(f) / 2:.3g}"
-traced = s[0].get("scattered_emission", {}).get("seconds", 0) / 2
+b = s[0]["noise_budget"]
+def pair(part):
+    a, c = b[part + "_top10"], b[part + "_top1"]
+    return "-" if a is None else f"{a:.3g} / {c:.3g}"
 print(f"| {tag} | {est} | {paths} | {seconds:.1f} | {r10['median_mc_over_shot_variance']:.3g} | "
-      f"{r1['median_mc_over_shot_variance']:.3g} | {r1['relative_rms_mc_error']:.3g} | {r10['sum_ratio_a_over_b']:.3f} | {largest:.2f} | {field} | {traced:.1f} |")
+      f"{r1['median_mc_over_shot_variance']:.3g} | {r1['relative_rms_mc_error']:.3g} | {r10['sum_ratio_a_over_b']:.3f} | {largest:.2f} | "
+      f"{pair('excitation_field')} | {pair('scattered_emission')} | {pair('paths')} |")
 PY
 }
 for tissue in "clear:$work/clear.json" "sigma_s 1 /mm:$scene" "sigma_s 2 /mm:$work/s2.json" "cortex, sigma_s 20 /mm:$work/cortex.json"; do
     tag=${tissue%%:*} file=${tissue#*:}
-    run "$tag" "$file" "split, field, paths carry scattered emission" 4
-    run "$tag" "$file" "split, field, scattered emission traced (--emission-photons 524288)" 4 --emission-photons 524288
-    [ "$tag" = "cortex, sigma_s 20 /mm" ] || run "$tag" "$file" "split, field, traced, --noise-ratio 0.5" 4 --emission-photons 524288 --noise-ratio 0.5 --max-spp 64
+    run "$tag" "$file" "paths carry the scattered emission, field 50 000 (earlier default)" 4 --emission-photons 0 --field-photons 50000
+    run "$tag" "$file" "default: traced emission 2^19, field 200 000" 2
+    [ "$tag" = "cortex, sigma_s 20 /mm" ] || run "$tag" "$file" "default, --noise-ratio 0.5 --max-spp 64" 2 --noise-ratio 0.5 --max-spp 64
 done

@@ -53,7 +53,9 @@ std::string fingerprint(const AcquireArgs& a, const optics::Microscope& m, const
                               {"channels", channels}, {"estimator", optics::estimatorName(o.estimator)},
                               {"noise_ratio", o.noiseRatio.value_or(0.0)},
                               {"max_spp", o.noiseRatio ? o.maxSpp : 0}, {"exposure_s", m.detector.exposureS},
-                              {"field_photons", o.field.photons}, {"emission_photons", o.emission.photons}};
+                              {"field_photons", o.field.photons},
+                              {"emission_photons", o.emission.photons ? static_cast<int64_t>(*o.emission.photons) : int64_t(-1)},
+                              {"emission_photons_per_pixel", o.emission.photonsPerPixel}};
     return j.dump();
 }
 
@@ -174,10 +176,11 @@ void addAcquireCommand(CLI::App& app) {
     cmd->add_option("--max-spp", a->maxSpp, "Adaptive sampling: most paths per pixel (default 4096)");
     cmd->add_option("--field-photons", a->fieldPhotons,
                     "Split estimator: photons per beam line and plane of the excitation field, which computes the scattered excitation "
-                    "instead of sampling it with paths (default 50000; 0: paths only)");
+                    "instead of sampling it with paths (default 200000; 0: paths only)");
     cmd->add_option("--emission-photons", a->emissionPhotons,
                     "Split estimator: photons per plane and channel that trace the computed emission's scattered light forward and image "
-                    "their vertices (default 0: camera paths carry it; 524288 halves to quarters the noise of the brightest tenth in scattering tissue for about 1.5 s a plane and channel)");
+                    "their vertices, where the tissue scatters the detected light (default 8 per pixel: 524288 on a 256 x 256 plane; 0: camera paths "
+                    "carry it)");
     cmd->add_option("--seed", a->seed, "Random seed (default: the scene's)");
     cmd->add_option("--exposure", a->exposure,
                     "Exposure: a time with a unit (\"20ms\"), or auto[:F]: after the stack is rendered, scale it to the exposure that puts "
