@@ -2,6 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <map>
+#include <string>
+
 namespace fluorosim::optics {
 namespace {
 
@@ -25,6 +29,54 @@ TEST(AcquisitionSummary, SaturatedPixelsAreToldApartFromMonteCarloOutliers) {
     const AcquisitionSummary::Saturation none = AcquisitionSummary::saturation(stack, 1000.0);
     EXPECT_EQ(none.pixels, 0u);  // at the full well is not over it
     EXPECT_EQ(none.monteCarlo, 0u);
+}
+
+// The noise budget: each part's noise variance over the camera's, per pixel, its median over the brightest
+// 10 % and 1 %. Known parts on a flat plane of 100 e-, no dark current or read noise: the field's half
+// difference 5 e- (0.25), the traced emission's slot halves 110 and 90 e- (half their difference, 10 e-: 1.0),
+// the paths' variance what stderr² holds beyond the traced part's (13 - 4: 0.09).
+TEST(AcquisitionSummary, TheNoiseBudgetSplitsTheVarianceByPart) {
+    Microscope m;
+    m.width = m.height = 10;
+    m.detector.darkCurrentElectronsPerS = 0;
+    m.detector.readNoiseElectrons = 0;
+    m.channels.push_back({});
+    m.channels.back().name = "c";
+    Stack stack;
+    stack.width = stack.height = 10;
+    stack.planes = 1;
+    stack.channels = {0};
+    stack.expected.assign(100, 100.f);
+    stack.stderrElectrons.assign(100, std::sqrt(13.f));
+    AcquireOptions o;
+    o.spp = 4;
+    AcquisitionSummary summary(m, stack, o);
+    PlaneImage image;
+    image.width = image.height = 10;
+    image.electrons.assign(100, 100.0);
+    image.stderrElectrons.assign(100, std::sqrt(13.0));
+    image.fieldHalfDifference.assign(100, 5.0);
+    image.emissionVariance.assign(100, 4.0);
+    for (int s = 0; s < 16; ++s) image.emissionEstimates.push_back(std::vector<double>(100, s < 8 ? 110.0 : 90.0));
+    EXPECT_EQ(summary.addPlane(0, 0, image), "");
+    std::map<std::string, double> budget;
+    for (const AcquisitionSummary::Entry& e : summary.entries(stack, m, std::nullopt, 1))
+        if (e.group == "noise_budget") {
+            EXPECT_FALSE(e.null) << e.name;
+            budget[e.name] = e.value;
+        }
+    ASSERT_EQ(budget.size(), 6u);
+    for (const char* top : {"_top10", "_top1"}) {
+        EXPECT_NEAR(budget[std::string("excitation_field") + top], 0.25, 1e-12);
+        EXPECT_NEAR(budget[std::string("scattered_emission") + top], 1.0, 1e-12);
+        EXPECT_NEAR(budget[std::string("paths") + top], 0.09, 1e-6);
+    }
+    // One path per pixel says nothing of the paths' spread: their entries are null then.
+    o.spp = 1;
+    AcquisitionSummary single(m, stack, o);
+    single.addPlane(0, 0, image);
+    for (const AcquisitionSummary::Entry& e : single.entries(stack, m, std::nullopt, 1))
+        if (e.group == "noise_budget") EXPECT_EQ(e.null, e.name.rfind("paths", 0) == 0) << e.name;
 }
 
 }  // namespace
