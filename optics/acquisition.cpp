@@ -478,13 +478,7 @@ const std::shared_ptr<const WidefieldPsf>& ChannelImaging::psfAt(const FocalPlan
 double fieldLateralSpacingMm(const Scene& scene, const std::vector<BeamLineSide>& lines, const FieldBox& box) {
     constexpr double kFineLateralMm = 0.004;
     double sigmaMax = 0;  // the largest extinction at a line
-    for (const Medium& m : scene.media)
-        if (!m.isVacuumLike())
-            for (const BeamLineSide& l : lines) {
-                ChannelValues most = m.channelMax();
-                const MediumSample c = m.spectra(SampledWavelengths::atLine(l.lambdaNm, 1.0)).at(most.data());
-                sigmaMax = std::max(sigmaMax, c.sigmaA[0] + c.sigmaS[0]);
-            }
+    for (const BeamLineSide& l : lines) sigmaMax = std::max(sigmaMax, largestExtinctionAt(scene, l.lambdaNm));
     for (double h : {0.016, 0.008}) {
         if (h * sigmaMax > 0.1) continue;
         bool flat = true;

@@ -83,7 +83,6 @@ std::string AcquisitionSummary::addPlane(size_t slot, int plane, const PlaneImag
             const double camera = std::max(0.0, image.electrons[i]) + darkElectrons_ + sqr(readNoise_);
             mcOverCamera_.push_back(sqr(image.stderrElectrons[i]) / camera);
             if (image.electrons[i] > 0) pathRel_.push_back(image.stderrElectrons[i] / image.electrons[i]);
-            if (!image.fieldHalfDifference.empty()) fieldOverCamera_.push_back(sqr(image.fieldHalfDifference[i]) / camera);
             std::array<std::optional<double>, kBudgetParts> part;
             if (!image.fieldHalfDifference.empty()) part[kFieldPart] = sqr(image.fieldHalfDifference[i]);
             double pathVariance = sqr(image.stderrElectrons[i]);
@@ -143,7 +142,7 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
         {"excitation_field", "electrons_fraction", fieldSum_ / total},
         {"excitation_field", "lateral_spacing_um", fieldSpacingUm_, !(fieldSpacingUm_ > 0)},
         // Its noise (correlated across pixels; from the field's two halves) over the camera's, brightest 10 %.
-        {"excitation_field", "median_noise_over_camera_variance_top10", median(fieldOverCamera_), fieldOverCamera_.empty()},
+        {"excitation_field", "median_noise_over_camera_variance_top10", median(budget_[kFieldPart][0]), budget_[kFieldPart][0].empty()},
         // The computed emission's scattered light, traced forward from its points (split estimator).
         {"scattered_emission", "photons", double(emissionPhotons_), false, true},
         {"scattered_emission", "vertices", double(emissionVertices_), false, true},

@@ -52,13 +52,12 @@ private:
     uint64_t pathSamples_ = 0, pilotSamples_ = 0, pixels_ = 0, computedPoints_ = 0, nonFinite_ = 0;
     double computedDropped_ = 0;
     UnscatteredTimings computedTimings_;  // summed over planes
-    // The excitation field: photons, seconds, the electrons its scattered light excites, and over the
-    // brightest pixels its noise variance (from its two halves) over the camera's.
+    // The excitation field: photons, seconds, the electrons its scattered light excites (its noise is the
+    // budget's first part).
     uint64_t fieldPhotons_ = 0;
     double fieldSeconds_ = 0, fieldSum_ = 0, fieldSpacingUm_ = 0;  // the finest lateral spacing of any plane's field
     uint64_t emissionPhotons_ = 0, emissionVertices_ = 0;
     double emissionSeconds_ = 0, emissionSum_ = 0;
-    std::vector<double> fieldOverCamera_;
     // The noise budget: each part's own noise variance over the camera's, per pixel, over the brightest 10 %
     // and 1 % of each plane's pixels ([part][0] and [part][1]). The field's and the traced emission's from
     // half the difference of their two halves (one degree of freedom, as two seeds give it), the paths'

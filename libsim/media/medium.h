@@ -134,7 +134,9 @@ public:
         if (!volume_) return {std::nullopt, tMin, tMax, constants_.data(), std::move(toMajorant)};
         // Where the fields' largest values bound the coefficient within kLooseMajorant of its floor (dye in
         // tissue that scatters more than the dye absorbs), one segment at those values spares the grid's DDA
-        // at the price of at most kLooseMajorant - 1 null collisions per real one.
+        // at the price of at most kLooseMajorant - 1 null collisions per real one. toMajorant is called here at
+        // the maxima and the floors before the iterator's own calls, so a caller's side effects in it (the
+        // segment's maxima it keeps) hold only from next() on.
         const SampledSpectrum most = toMajorant(channelMax_.data()), least = toMajorant(channelFloor_.data());
         bool loose = true;
         for (int i = 0; i < kNumWavelengths && loose; ++i) loose = most[i] <= kLooseMajorant * least[i];

@@ -289,6 +289,17 @@ std::vector<BeamLineSide> beamLineSides(const std::vector<Light>& lights) {
     return out;
 }
 
+double largestExtinctionAt(const Scene& scene, double lambdaNm) {
+    const SampledWavelengths wl = SampledWavelengths::atLine(lambdaNm, 1.0);
+    double most = 0;
+    for (const Medium& m : scene.media)
+        if (!m.isVacuumLike()) {
+            const MediumSample c = m.spectra(wl).at(m.channelMax().data());
+            most = std::max(most, c.sigmaA[0] + c.sigmaS[0]);
+        }
+    return most;
+}
+
 void FluenceOptions::validate() const {
     if (photons < 2 || photons > (uint64_t(1) << 40)) throw ConfigError("excitation field: photons must lie in [2, 2^40], got " + std::to_string(photons));
     if (threads < 0) throw ConfigError("excitation field: threads must be >= 0, got " + std::to_string(threads));
@@ -305,12 +316,7 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
     const double lambda = line.lambdaNm;
     const SampledWavelengths wl = SampledWavelengths::atLine(lambda, 1.0);
     const AxisSource axis(scene, profile, line.side, lambda);
-    bool rouletteAllowed = true;
-    for (const Medium& m : scene.media)
-        if (!m.isVacuumLike()) {
-            const MediumSample c = m.spectra(wl).at(m.channelMax().data());
-            rouletteAllowed = rouletteAllowed && (c.sigmaA[0] + c.sigmaS[0]) * kRouletteMarginMm <= kRouletteOpticalMargin;
-        }
+    const bool rouletteAllowed = largestExtinctionAt(scene, lambda) * kRouletteMarginMm <= kRouletteOpticalMargin;
     const FluenceGrid empty(box);
     requireMemory(8.0 * static_cast<double>(empty.nodes()) * (kSlots + 3), "the excitation field's grids");
     std::vector<FluenceGrid> slots(kSlots, empty);

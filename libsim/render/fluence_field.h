@@ -83,6 +83,9 @@ struct BeamLineSide {
 // Every side of every line of the beams among `lights` (none when a light is not a beam).
 std::vector<BeamLineSide> beamLineSides(const std::vector<Light>& lights);
 
+// The largest extinction (σa + σs, /mm) of any of the scene's media at λ, at its channels' largest values.
+double largestExtinctionAt(const Scene& scene, double lambdaNm);
+
 struct FluenceOptions {
     uint64_t photons = 200000;  // per beam line side
     uint64_t seed = 1;
