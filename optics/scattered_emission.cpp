@@ -309,27 +309,39 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
             const double toFront = imaging.workingDistanceMm() - dz;
             if (!(toFront > 0)) return;
             const int level = std::clamp(covered.imageLevel(v), 0, kImageLevels - 1);
-            const int n = level == 0 ? directions : 1;
+            const int n = directions;
             const double det = detection(ph.lambda);
             if (!(det > 0)) return;
             const SampledWavelengths wl = SampledWavelengths::atLine(ph.lambda, 1.0);
             std::vector<double>& img = slot->level[static_cast<size_t>(level)];
             if (img.empty()) img.assign(static_cast<size_t>(width) * height, 0.0);
+            // Directions of the cone from two techniques, the phase lobe (a draw outside the cone gives nothing)
+            // and the cone uniformly, weighed by the balance heuristic (f/q, q = half of each density: f/q <= 2).
+            // With an even count the techniques alternate and the cone's draws are stratified in azimuth, so that
+            // a vertex's light spreads over its whole defocus disc (one direction put all of a pooled vertex into
+            // one block of the ~50 its disc covers: most of the traced part's noise, docs/performance.md); with an
+            // odd count each draw picks its technique at random. Either way each draw is one of the mixture.
+            const bool alternate = phase && n % 2 == 0;
+            const int coneDraws = !phase ? n : (alternate ? n / 2 : n);
+            const double phi0 = rng->uniform();
             for (int k = 0; k < n; ++k) {
-                // A direction of the cone: half from the phase lobe (a draw outside the cone gives nothing), half
-                // uniform over the cone; the one-sample mixture density bounds f/q by 2.
+                const int stratum = !phase ? k : k / 2;
+                auto coneDraw = [&] {
+                    const double u = alternate || !phase ? (stratum + phi0) / coneDraws : rng->uniform();
+                    return imaging.coneDirection(1 - rng->uniform() * (1 - cosMax), 2 * kPi * u);
+                };
                 Vec3 w;
                 double f, q;
                 if (!phase) {
-                    w = imaging.coneDirection(1 - rng->uniform() * (1 - cosMax), 2 * kPi * rng->uniform());
+                    w = coneDraw();
                     f = kInv4Pi;
                     q = 1 / cone;
                 } else {
-                    if (rng->uniform() < 0.5) {
+                    if (alternate ? k % 2 == 0 : rng->uniform() < 0.5) {
                         double pdf = 0;
                         w = phase->sample(ph.ray.d, rng->uniform(), rng->uniform(), &pdf);
                     } else {
-                        w = imaging.coneDirection(1 - rng->uniform() * (1 - cosMax), 2 * kPi * rng->uniform());
+                        w = coneDraw();
                     }
                     f = phase->pdf(ph.ray.d, w);
                     q = 0.5 * f + 0.5 / cone;

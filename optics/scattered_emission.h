@@ -5,7 +5,7 @@
 // emission, weighted by the exact emission coefficient there over that density), are traced by analog
 // transport (render/photon_tracer.h: scattering, absorption, re-emission by dyes), and each vertex where they
 // scatter or are re-emitted is imaged as a point source: a few directions of the collection cone, drawn from
-// a mixture of the phase lobe and the cone, each with its transmittance to the objective, landing where the
+// the phase lobe and the cone in turn (the cone's stratified in azimuth), each with its transmittance to the objective, landing where the
 // camera paths' geometry puts it and weighed by the PSF's h/h_geo there, so that the photons estimate exactly
 // what the camera paths' connections and branches estimated (those then leave it out:
 // PathStart::computedEmissionTraced). A vertex far from focus is imaged on pooled blocks, as the paths are.
@@ -28,12 +28,13 @@ namespace fluorosim::optics {
 
 struct ScatteredEmissionOptions {
     // Photons per plane and channel: `photons` when set (0: the camera paths carry it), else photonsPerPixel times
-    // the plane's pixels. The default, 8 (2^19 on a 256² plane), cuts the camera-noise median of the brightest
-    // tenth in σs 1–2 /mm tissue 2–6-fold for about 1.2 s a 256² plane and channel (docs/performance.md).
+    // the plane's pixels. The default, 4 (2^18 on a 256² plane) with 4 directions per vertex, costs what 8 with one
+    // direction per pooled vertex cost and leaves less noise (docs/performance.md, "Directions per vertex").
     std::optional<uint64_t> photons;
-    double photonsPerPixel = 8;
+    double photonsPerPixel = 4;
     uint64_t photonsFor(size_t pixels) const;
-    int directions = 4;                    // per vertex imaged per pixel (pooled vertices take one)
+    int directions = 4;                    // per vertex imaged, pooled or not
+
     void validate() const;                 // ConfigError naming the field and value
 };
 

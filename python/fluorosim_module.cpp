@@ -659,7 +659,7 @@ PYBIND11_MODULE(fluorosim, mod) {
             "`fluorosim acquire` with the same options (estimator: split or path; noise_ratio and max_spp: adaptive sampling; "
             "exposure: a time such as \"20 ms\", or \"auto\" / \"auto:F\" to put the brightest pixel at F of the full well; "
             "field_photons: the excitation field's photons per beam line and plane, 0 for none; emission_photons: the photons per "
-            "plane and channel that trace the computed emission's scattered light forward, default 8 per pixel, 0 to leave it to "
+            "plane and channel that trace the computed emission's scattered light forward, default 4 per pixel, 0 to leave it to "
             "camera paths). "
             "progress: a callable given the fraction done (0..1), about every 0.1 s. Ctrl-C stops the run and raises "
             "KeyboardInterrupt.");

@@ -179,7 +179,7 @@ void addAcquireCommand(CLI::App& app) {
                     "instead of sampling it with paths (default 200000; 0: paths only)");
     cmd->add_option("--emission-photons", a->emissionPhotons,
                     "Split estimator: photons per plane and channel that trace the computed emission's scattered light forward and image "
-                    "their vertices, where the tissue scatters the detected light (default 8 per pixel: 524288 on a 256 x 256 plane; 0: camera paths "
+                    "their vertices, where the tissue scatters the detected light (default 4 per pixel: 262144 on a 256 x 256 plane; 0: camera paths "
                     "carry it)");
     cmd->add_option("--seed", a->seed, "Random seed (default: the scene's)");
     cmd->add_option("--exposure", a->exposure,
