@@ -228,6 +228,32 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
             r.complete = false;
             return r;
         }
+        // Adaptive sampling: more photons, in one further trace from other streams, until the traced part's
+        // median variance over the brightest tenth is at most half the target's (the rest is the paths' and
+        // the field's), at most kMostTracedFactor times the first count. Its slots see only the photons' own
+        // noise, not the field's that reaches their sources (docs/performance.md).
+        if (o.noiseRatio && traced.photons > 0) {
+            std::vector<double> signal = computed;
+            for (size_t i = 0; i < signal.size(); ++i) signal[i] += traced.electrons[i];
+            const double target = 0.5 * sqr(*o.noiseRatio);
+            const double ratio = tracedNoiseOverCamera(traced, signal, detector.darkCurrentElectronsPerS * detector.exposureS, detector.readNoiseElectrons);
+            if (ratio > target) {
+                constexpr double kMostTracedFactor = 32;
+                const double factor = std::min(kMostTracedFactor, ratio / target);
+                ScatteredEmissionOptions more = o.emission;
+                more.photons = static_cast<uint64_t>(std::ceil((factor - 1) * static_cast<double>(traced.photons)));
+                if (*more.photons >= 2) {
+                    const ScatteredEmissionImage extra = traceScatteredEmission(scene, tracer, imaging, covered, *emissionPoints, field.get(), detection,
+                                                                                detector.exposureS, more, o.seed, mixBits(streamKey + 0x6d6f7265ULL),
+                                                                                o.threads, o.cancel);
+                    if (!extra.complete) {
+                        r.complete = false;
+                        return r;
+                    }
+                    traced = pooledTraces(traced, extra);
+                }
+            }
+        }
         r.emissionPhotons = traced.photons;
         r.emissionVertices = traced.vertices;
         r.emissionSeconds = traced.seconds;

@@ -520,4 +520,42 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
     return out;
 }
 
+ScatteredEmissionImage pooledTraces(const ScatteredEmissionImage& a, const ScatteredEmissionImage& b) {
+    if (b.photons == 0) return a;
+    if (a.photons == 0) return b;
+    if (a.slots.size() != b.slots.size() || a.electrons.size() != b.electrons.size())
+        throw std::logic_error("pooledTraces: traces of different planes");
+    const double wa = double(a.photons) / double(a.photons + b.photons), wb = 1 - wa;
+    ScatteredEmissionImage out;
+    const size_t pixels = a.electrons.size(), slots = a.slots.size();
+    out.electrons.assign(pixels, 0.0);
+    out.variance.assign(pixels, 0.0);
+    out.slots.assign(slots, std::vector<double>(pixels, 0.0));
+    for (size_t s = 0; s < slots; ++s)
+        for (size_t i = 0; i < pixels; ++i) {
+            out.slots[s][i] = wa * a.slots[s][i] + wb * b.slots[s][i];
+            out.electrons[i] += out.slots[s][i] / double(slots);
+        }
+    for (size_t s = 0; s < slots; ++s)
+        for (size_t i = 0; i < pixels; ++i) out.variance[i] += sqr(out.slots[s][i] - out.electrons[i]) / (double(slots) * double(slots - 1));
+    out.photons = a.photons + b.photons;
+    out.vertices = a.vertices + b.vertices;
+    out.fieldLitMedia = a.fieldLitMedia;
+    out.seconds = a.seconds + b.seconds;
+    out.complete = a.complete && b.complete;
+    return out;
+}
+
+double tracedNoiseOverCamera(const ScatteredEmissionImage& traced, const std::vector<double>& signal, double darkElectrons, double readNoiseElectrons) {
+    if (traced.variance.size() != signal.size() || signal.empty()) return 0.0;
+    std::vector<double> sorted = signal;
+    std::sort(sorted.begin(), sorted.end());
+    const double cut = sorted[static_cast<size_t>(0.9 * static_cast<double>(sorted.size() - 1))];
+    std::vector<double> ratio;
+    for (size_t i = 0; i < signal.size(); ++i)
+        if (signal[i] >= cut) ratio.push_back(traced.variance[i] / (std::max(0.0, signal[i]) + darkElectrons + sqr(readNoiseElectrons)));
+    std::nth_element(ratio.begin(), ratio.begin() + static_cast<std::ptrdiff_t>(ratio.size() / 2), ratio.end());
+    return ratio[ratio.size() / 2];
+}
+
 }  // namespace fluorosim::optics

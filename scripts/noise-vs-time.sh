@@ -7,8 +7,10 @@
 # all, equal in both renders). Tissues: clear, the sample's (sigma_s 1 /mm), sigma_s 2 /mm and uncleared
 # cortex (sigma_s 20 /mm, g 0.9). Estimators: camera paths carrying the scattered emission with the field
 # at 50 000 photons (--emission-photons 0 --field-photons 50000, 4 paths per pixel: the default until the
-# thirteenth session); the default (the scattered emission traced forward, 2^19 photons per plane and
-# channel, the field at 200 000, 2 paths per pixel as README command 1 runs); the default adaptively.
+# thirteenth session); the default (the scattered emission traced forward, 2^18 photons per plane and
+# channel with each vertex in 4 directions since the fourteenth session, the field at 200 000, 2 paths per
+# pixel as README command 1 runs); the default adaptively (the paths and, since the fourteenth session,
+# the traced photons).
 # The last three columns give the first seed's noise budget (the summary's `noise_budget`: each part's own
 # median noise variance over the camera's, brightest 10 % / brightest 1 %).
 # Usage: scripts/noise-vs-time.sh [build/apps/fluorosim] > table.md
@@ -69,6 +71,6 @@ PY
 for tissue in "clear:$work/clear.json" "sigma_s 1 /mm:$scene" "sigma_s 2 /mm:$work/s2.json" "cortex, sigma_s 20 /mm:$work/cortex.json"; do
     tag=${tissue%%:*} file=${tissue#*:}
     run "$tag" "$file" "paths carry the scattered emission, field 50 000 (earlier default)" 4 --emission-photons 0 --field-photons 50000
-    run "$tag" "$file" "default: traced emission 2^19, field 200 000" 2
+    run "$tag" "$file" "default: traced emission 2^18 × 4 directions, field 200 000" 2
     [ "$tag" = "cortex, sigma_s 20 /mm" ] || run "$tag" "$file" "default, --noise-ratio 0.5 --max-spp 64" 2 --noise-ratio 0.5 --max-spp 64
 done

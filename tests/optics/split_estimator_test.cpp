@@ -15,6 +15,7 @@
 
 #include "optics/acquisition.h"
 #include "optics/light_sheet.h"
+#include "optics/scattered_emission.h"
 #include "support/fluorescent_scenes.h"
 #include "volume/volume_fields.h"
 
@@ -232,6 +233,59 @@ TEST(AdaptiveSampling, ALooseTargetChangesNothing) {
     const optics::PlaneImage adaptive = render(scene, optics::Estimator::Split, 4, 31, 1e6);
     EXPECT_EQ(adaptive.electrons, fixed.electrons);
     EXPECT_EQ(adaptive.pathSamples, fixed.pathSamples);
+}
+
+// The traced scattered emission's photon count adapts too: a target its slots' variance misses over the
+// brightest tenth traces more photons (at most 32 times the first count) from other streams, pooled with
+// the first trace; the mean stays that of the fixed count, and a loose target traces nothing more.
+TEST(AdaptiveSampling, TracesMorePhotonsWhereTheTracedEmissionMissesTheTarget) {
+    const Scene scene = filamentScene(2.0);
+    constexpr uint64_t kFirst = uint64_t(1) << 13;
+    const optics::PlaneImage fixed = render(scene, optics::Estimator::Split, 2, 41, std::nullopt, optics::ExcitationFieldOptions{}.photons, kFirst);
+    const optics::PlaneImage loose = render(scene, optics::Estimator::Split, 2, 41, 1e6, optics::ExcitationFieldOptions{}.photons, kFirst);
+    const optics::PlaneImage adaptive = render(scene, optics::Estimator::Split, 2, 41, 0.05, optics::ExcitationFieldOptions{}.photons, kFirst);
+    auto tracedRatio = [](const optics::PlaneImage& r) {
+        optics::ScatteredEmissionImage t;
+        t.variance = r.emissionVariance;
+        return optics::tracedNoiseOverCamera(t, r.electrons, 0.0, 1.4);
+    };
+    std::printf("  traced photons: fixed %llu, loose target %llu, target 0.05 %llu; traced variance / camera's: %.3g -> %.3g\n",
+                static_cast<unsigned long long>(fixed.emissionPhotons), static_cast<unsigned long long>(loose.emissionPhotons),
+                static_cast<unsigned long long>(adaptive.emissionPhotons), tracedRatio(fixed), tracedRatio(adaptive));
+    EXPECT_EQ(fixed.emissionPhotons, kFirst);
+    EXPECT_EQ(loose.emissionPhotons, kFirst);
+    EXPECT_EQ(loose.emissionElectrons, fixed.emissionElectrons);
+    EXPECT_GT(adaptive.emissionPhotons, 2 * kFirst);
+    EXPECT_LE(adaptive.emissionPhotons, 32 * kFirst);
+    EXPECT_LT(tracedRatio(adaptive), 0.5 * tracedRatio(fixed));
+    const CropSum a = crop(fixed, 0, 0, kSize), b = crop(adaptive, 0, 0, kSize);
+    const double z = (b.sum - a.sum) / std::sqrt(a.variance + b.variance);
+    std::printf("  image sum: fixed %.5g +- %.2g, adaptive %.5g +- %.2g, z = %+.2f\n", a.sum, std::sqrt(a.variance), b.sum, std::sqrt(b.variance), z);
+    EXPECT_LT(std::abs(z), 4.0);
+}
+
+// Pooling two traces: each slot the photon-weighted mean of the two traces' slots, the variance from them.
+TEST(ScatteredEmission, PooledTracesWeighTheirPhotons) {
+    optics::ScatteredEmissionImage a, b;
+    a.photons = 100;
+    b.photons = 300;
+    a.slots = {{1.0, 2.0}, {3.0, 6.0}};
+    b.slots = {{5.0, 2.0}, {5.0, 2.0}};
+    for (auto* t : {&a, &b}) {
+        t->electrons = {0.5 * (t->slots[0][0] + t->slots[1][0]), 0.5 * (t->slots[0][1] + t->slots[1][1])};
+        t->variance = {0.0, 0.0};
+    }
+    const optics::ScatteredEmissionImage p = optics::pooledTraces(a, b);
+    EXPECT_EQ(p.photons, 400u);
+    // Slots: 0.25 a + 0.75 b = {4.0, 2.0} and {4.5, 3.0}.
+    EXPECT_DOUBLE_EQ(p.electrons[0], 4.25);
+    EXPECT_DOUBLE_EQ(p.electrons[1], 2.5);
+    EXPECT_DOUBLE_EQ(p.electrons[0], 0.25 * a.electrons[0] + 0.75 * b.electrons[0]);
+    // (4 - 4.25)² + (4.5 - 4.25)² over 2 × 1.
+    EXPECT_DOUBLE_EQ(p.variance[0], 0.0625);
+    EXPECT_DOUBLE_EQ(p.variance[1], 0.25);
+    optics::ScatteredEmissionImage none;
+    EXPECT_EQ(optics::pooledTraces(a, none).electrons, a.electrons);
 }
 
 }  // namespace
