@@ -261,4 +261,17 @@ std::vector<double> Detector::expectedAdu(const std::vector<double>& expectedEle
     return out;
 }
 
+double medianVarianceOverCamera(const std::vector<double>& variance, const std::vector<double>& signal, double quantile, double darkElectrons,
+                                double readNoiseElectrons) {
+    if (variance.size() != signal.size() || signal.empty()) return 0.0;
+    std::vector<double> sorted = signal;
+    std::sort(sorted.begin(), sorted.end());
+    const double cut = sorted[static_cast<size_t>(std::clamp(quantile, 0.0, 1.0) * static_cast<double>(sorted.size() - 1))];
+    std::vector<double> ratio;
+    for (size_t i = 0; i < signal.size(); ++i)
+        if (signal[i] >= cut) ratio.push_back(variance[i] / (std::max(0.0, signal[i]) + darkElectrons + readNoiseElectrons * readNoiseElectrons));
+    std::nth_element(ratio.begin(), ratio.begin() + static_cast<std::ptrdiff_t>(ratio.size() / 2), ratio.end());
+    return ratio[ratio.size() / 2];
+}
+
 }  // namespace fluorosim::optics

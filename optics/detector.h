@@ -119,4 +119,9 @@ double sampleGamma(double shape, double scale, Rng& rng);
 // Standard normal (Box-Muller, one value per call so the stream use is fixed per sample).
 double sampleStandardNormal(Rng& rng);
 
+// The median, over the pixels at or above the `quantile` of `signal` (e⁻), of variance / (signal + dark +
+// read²): a Monte Carlo part's noise against the camera's, as the adaptive mode and the summary judge it.
+double medianVarianceOverCamera(const std::vector<double>& variance, const std::vector<double>& signal, double quantile, double darkElectrons,
+                                double readNoiseElectrons);
+
 }  // namespace fluorosim::optics

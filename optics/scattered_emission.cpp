@@ -546,16 +546,4 @@ ScatteredEmissionImage pooledTraces(const ScatteredEmissionImage& a, const Scatt
     return out;
 }
 
-double tracedNoiseOverCamera(const ScatteredEmissionImage& traced, const std::vector<double>& signal, double darkElectrons, double readNoiseElectrons) {
-    if (traced.variance.size() != signal.size() || signal.empty()) return 0.0;
-    std::vector<double> sorted = signal;
-    std::sort(sorted.begin(), sorted.end());
-    const double cut = sorted[static_cast<size_t>(0.9 * static_cast<double>(sorted.size() - 1))];
-    std::vector<double> ratio;
-    for (size_t i = 0; i < signal.size(); ++i)
-        if (signal[i] >= cut) ratio.push_back(traced.variance[i] / (std::max(0.0, signal[i]) + darkElectrons + sqr(readNoiseElectrons)));
-    std::nth_element(ratio.begin(), ratio.begin() + static_cast<std::ptrdiff_t>(ratio.size() / 2), ratio.end());
-    return ratio[ratio.size() / 2];
-}
-
 }  // namespace fluorosim::optics

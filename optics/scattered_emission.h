@@ -57,10 +57,6 @@ struct ScatteredEmissionImage {
 // two traces' same slots (independent estimates still), the variance from the pooled slots'.
 ScatteredEmissionImage pooledTraces(const ScatteredEmissionImage& a, const ScatteredEmissionImage& b);
 
-// The median, over the pixels at or above the 90th percentile of `signal`, of the traced part's variance
-// over the camera's (signal + dark + read², in e⁻²): what --noise-ratio compares with its target.
-double tracedNoiseOverCamera(const ScatteredEmissionImage& traced, const std::vector<double>& signal, double darkElectrons, double readNoiseElectrons);
-
 // Traces the photons of `emission` (a plane's computed emission) for one plane. `covered` decides which
 // points the computed part holds (CameraPathImaging::computesUnscatteredAt) and how finely a vertex is imaged
 // (imageLevel); `detection` gives photoelectrons per joule at λ. Refracting surfaces on the way to the

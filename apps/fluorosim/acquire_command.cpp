@@ -174,7 +174,8 @@ void addAcquireCommand(CLI::App& app) {
                     "Adaptive sampling: paths per pixel (--spp at least) until the Monte Carlo standard error is at most this times the "
                     "camera's noise of the expected signal, sqrt(signal + dark + read^2), decided from separate pilot paths; and the traced "
                     "scattered emission's photons (up to 32 times --emission-photons) until their median variance over the brightest tenth "
-                    "is at most half the target's");
+                    "is at most half the target's, and the excitation field's (up to 16 times --field-photons) until its variance in the "
+                    "computed image over the brightest 1 % is");
     cmd->add_option("--max-spp", a->maxSpp, "Adaptive sampling: most paths per pixel (default 4096)");
     cmd->add_option("--field-photons", a->fieldPhotons,
                     "Split estimator: photons per beam line and plane of the excitation field, which computes the scattered excitation "

@@ -280,6 +280,29 @@ void FluenceGrid::scale(double s) {
     for (double& v : values_) v *= s;
 }
 
+BeamFluence pooledFluence(const BeamFluence& a, const BeamFluence& b) {
+    if (b.stats.photons == 0) return a;
+    if (a.stats.photons == 0) return b;
+    if (a.mean.values().size() != b.mean.values().size()) throw std::logic_error("pooledFluence: fields over different boxes");
+    const double wa = double(a.stats.photons) / double(a.stats.photons + b.stats.photons), wb = 1 - wa;
+    BeamFluence out = a;
+    auto pool = [&](FluenceGrid& into, const FluenceGrid& other) {
+        FluenceGrid scaled = other;
+        scaled.scale(wb);
+        into.scale(wa);
+        into.add(scaled);
+    };
+    pool(out.mean, b.mean);
+    for (int k = 0; k < 2; ++k) pool(out.half[k], b.half[k]);
+    out.stats.photons += b.stats.photons;
+    out.stats.sourced += b.stats.sourced;
+    out.stats.truncated += b.stats.truncated;
+    out.stats.sourcePowerW = wa * a.stats.sourcePowerW + wb * b.stats.sourcePowerW;
+    out.stats.seconds += b.stats.seconds;
+    out.stats.complete = a.stats.complete && b.stats.complete;
+    return out;
+}
+
 std::vector<BeamLineSide> beamLineSides(const std::vector<Light>& lights) {
     if (!std::all_of(lights.begin(), lights.end(), [](const Light& l) { return std::holds_alternative<BeamLight>(l); })) return {};
     std::vector<BeamLineSide> out;

@@ -116,6 +116,10 @@ struct BeamFluence {
 BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const FieldBox& box, const FluenceOptions& options,
                              const std::atomic<bool>* cancel = nullptr);
 
+// Two traces of one line side over the same box pooled as one with all their photons: the mean and each half
+// weighted by the photons each trace had.
+BeamFluence pooledFluence(const BeamFluence& a, const BeamFluence& b);
+
 // The scattered light of a plane's beams at their lines, as the path tracer looks it up.
 class BeamExcitationField final : public ExcitationField {
 public:
