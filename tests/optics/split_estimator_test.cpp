@@ -111,6 +111,14 @@ CropSum crop(const optics::PlaneImage& r, int x0, int y0, int size) {
     return c;
 }
 
+// An adaptive render's image sum against a fixed count's, within 4 standard errors of their difference.
+void expectSameImageSum(const optics::PlaneImage& fixed, const optics::PlaneImage& adaptive) {
+    const CropSum a = crop(fixed, 0, 0, kSize), b = crop(adaptive, 0, 0, kSize);
+    const double z = (b.sum - a.sum) / std::sqrt(a.variance + b.variance);
+    std::printf("  image sum: fixed %.5g +- %.2g, adaptive %.5g +- %.2g, z = %+.2f\n", a.sum, std::sqrt(a.variance), b.sum, std::sqrt(b.variance), z);
+    EXPECT_LT(std::abs(z), 4.0);
+}
+
 void expectSameImage(double sigmaS, int pathSpp, int splitSpp, uint64_t fieldPhotons = optics::ExcitationFieldOptions{}.photons,
                      uint64_t emissionPhotons = kEmissionPhotons, double sheetHeightMm = 0.1, double fieldSpacingUm = 4) {
     const Scene scene = filamentScene(sigmaS, sheetHeightMm);
@@ -221,10 +229,7 @@ TEST(AdaptiveSampling, KeepsTheMeanAndSpendsPathsWhereTheNoiseIs) {
     EXPECT_LT(spent, 1024.0);
     EXPECT_EQ(adaptive.pilotSamples, 16 * adaptive.electrons.size());
     EXPECT_LT(medianMcOverCamera(adaptive), medianMcOverCamera(fixed));
-    const CropSum a = crop(fixed, 0, 0, kSize), b = crop(adaptive, 0, 0, kSize);
-    const double z = (b.sum - a.sum) / std::sqrt(a.variance + b.variance);
-    std::printf("  image sum: fixed %.5g +- %.2g, adaptive %.5g +- %.2g, z = %+.2f\n", a.sum, std::sqrt(a.variance), b.sum, std::sqrt(b.variance), z);
-    EXPECT_LT(std::abs(z), 4.0);
+    expectSameImageSum(fixed, adaptive);
 }
 
 TEST(AdaptiveSampling, ALooseTargetChangesNothing) {
@@ -254,10 +259,7 @@ TEST(AdaptiveSampling, TracesMorePhotonsWhereTheTracedEmissionMissesTheTarget) {
     EXPECT_GT(adaptive.emissionPhotons, 2 * kFirst);
     EXPECT_LE(adaptive.emissionPhotons, 32 * kFirst);
     EXPECT_LT(tracedRatio(adaptive), 0.5 * tracedRatio(fixed));
-    const CropSum a = crop(fixed, 0, 0, kSize), b = crop(adaptive, 0, 0, kSize);
-    const double z = (b.sum - a.sum) / std::sqrt(a.variance + b.variance);
-    std::printf("  image sum: fixed %.5g +- %.2g, adaptive %.5g +- %.2g, z = %+.2f\n", a.sum, std::sqrt(a.variance), b.sum, std::sqrt(b.variance), z);
-    EXPECT_LT(std::abs(z), 4.0);
+    expectSameImageSum(fixed, adaptive);
 }
 
 // The excitation field's photon count adapts as well: where its noise in the computed image over the
@@ -286,10 +288,7 @@ TEST(AdaptiveSampling, TracesMoreFieldPhotonsWhereTheFieldMissesTheTarget) {
     EXPECT_GT(adaptive.fieldPhotons, 2 * fixed.fieldPhotons);
     EXPECT_LE(adaptive.fieldPhotons, 16 * fixed.fieldPhotons);
     EXPECT_LT(fieldVariance(adaptive), 0.25 * fieldVariance(fixed));
-    const CropSum a = crop(fixed, 0, 0, kSize), b = crop(adaptive, 0, 0, kSize);
-    const double z = (b.sum - a.sum) / std::sqrt(a.variance + b.variance);
-    std::printf("  image sum: fixed %.5g +- %.2g, adaptive %.5g +- %.2g, z = %+.2f\n", a.sum, std::sqrt(a.variance), b.sum, std::sqrt(b.variance), z);
-    EXPECT_LT(std::abs(z), 4.0);
+    expectSameImageSum(fixed, adaptive);
 }
 
 // Pooling two traces: each slot the photon-weighted mean of the two traces' slots, the variance from them.
