@@ -107,6 +107,19 @@ private:
 
 // Pilot paths of adaptive sampling draw from sample indices the estimate never reaches.
 constexpr uint64_t kPilotSample = uint64_t(1) << 40;
+// The further traces of adaptive sampling (field and photons) draw from streams keyed apart from the first's.
+constexpr uint64_t kAdaptiveStreams = 0x6d6f7265ULL;
+
+// One rule for the adaptive field and photons: a part whose median variance over the camera's is `ratio`,
+// against half the target's square (the rest is left to the other parts), takes that multiple of its
+// `first` count (at most `mostFactor` times it) in all: the photons to add, or 0 when it already meets it
+// or the addition is below two (the tracers' smallest count).
+uint64_t adaptiveExtraPhotons(double ratio, double noiseRatio, double mostFactor, uint64_t first) {
+    const double target = 0.5 * sqr(noiseRatio);
+    if (!(ratio > target)) return 0;
+    const double extra = std::ceil((std::min(mostFactor, ratio / target) - 1) * static_cast<double>(first));
+    return extra >= 2 ? static_cast<uint64_t>(extra) : 0;
+}
 
 struct PixelTally {
     double sum = 0, sum2 = 0;
@@ -177,6 +190,8 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
     r.height = height;
     r.electrons.assign(static_cast<size_t>(width) * height, 0.0);
     r.stderrElectrons.assign(r.electrons.size(), 0.0);
+    // Dark electrons of the exposure: part of the camera noise an adaptive target is relative to.
+    const double darkElectrons = detector.darkCurrentElectronsPerS * detector.exposureS;
     std::vector<double> computed(r.electrons.size(), 0.0);
     std::shared_ptr<const EmissionPoints> emissionPoints;
     std::unique_ptr<const BeamExcitationField> field;
@@ -196,20 +211,19 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         }
         // Adaptive sampling: more field photons, in one further trace from other streams pooled with the first,
         // until the field's median variance in the computed image over the brightest 1 % (where the neurites
-        // are, and where its noise is; at least 64 pixels) is at most half the target's, at most kMostFieldFactor times the first
-        // count; the computed image is then made again with the pooled field.
+        // are, and where its noise is; at least 64 pixels) is at most half the target's, at most
+        // kMostFieldFactor times the first count; the computed image is then made again with the pooled field.
         if (o.noiseRatio && field && !u.fieldHalfDifference.empty()) {
+            constexpr double kMostFieldFactor = 16;
             std::vector<double> variance(u.fieldHalfDifference.size());
             for (size_t i = 0; i < variance.size(); ++i) variance[i] = sqr(u.fieldHalfDifference[i]);
-            const double target = 0.5 * sqr(*o.noiseRatio);
-            const double ratio = medianVarianceOverCamera(variance, u.electrons, std::min(0.99, 1.0 - 64.0 / double(variance.size())), detector.darkCurrentElectronsPerS * detector.exposureS,
-                                                  detector.readNoiseElectrons);
-            if (ratio > target) {
-                constexpr double kMostFieldFactor = 16;
-                AcquireOptions more = o;
-                more.field.photons = static_cast<uint64_t>(std::ceil((std::min(kMostFieldFactor, ratio / target) - 1) * static_cast<double>(o.field.photons)));
+            const double brightest = std::min(0.99, 1.0 - 64.0 / double(variance.size()));
+            AcquireOptions more = o;
+            more.field.photons = adaptiveExtraPhotons(medianVarianceOverCamera(variance, u.electrons, brightest, darkElectrons, detector.readNoiseElectrons),
+                                                      *o.noiseRatio, kMostFieldFactor, o.field.photons);
+            if (more.field.photons > 0) {
                 std::unique_ptr<const BeamExcitationField> extra =
-                    more.field.photons >= 2 ? traceExcitationField(scene, tracer, imaging, *model, more, mixBits(streamKey + 0x6d6f7265ULL)) : nullptr;
+                    traceExcitationField(scene, tracer, imaging, *model, more, mixBits(streamKey + kAdaptiveStreams));
                 if (extra) {
                     std::vector<BeamFluence> pooled;
                     for (size_t i = 0; i < field->fields().size(); ++i) pooled.push_back(pooledFluence(field->fields()[i], extra->fields()[i]));
@@ -269,26 +283,21 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         // the field's), at most kMostTracedFactor times the first count. Its slots see only the photons' own
         // noise, not the field's that reaches their sources (docs/performance.md).
         if (o.noiseRatio && traced.photons > 0) {
+            constexpr double kMostTracedFactor = 32;
             std::vector<double> signal = computed;
             for (size_t i = 0; i < signal.size(); ++i) signal[i] += traced.electrons[i];
-            const double target = 0.5 * sqr(*o.noiseRatio);
-            const double ratio =
-                medianVarianceOverCamera(traced.variance, signal, 0.9, detector.darkCurrentElectronsPerS * detector.exposureS, detector.readNoiseElectrons);
-            if (ratio > target) {
-                constexpr double kMostTracedFactor = 32;
-                const double factor = std::min(kMostTracedFactor, ratio / target);
-                ScatteredEmissionOptions more = o.emission;
-                more.photons = static_cast<uint64_t>(std::ceil((factor - 1) * static_cast<double>(traced.photons)));
-                if (*more.photons >= 2) {
-                    const ScatteredEmissionImage extra = traceScatteredEmission(scene, tracer, imaging, covered, *emissionPoints, field.get(), detection,
-                                                                                detector.exposureS, more, o.seed, mixBits(streamKey + 0x6d6f7265ULL),
-                                                                                o.threads, o.cancel);
-                    if (!extra.complete) {
-                        r.complete = false;
-                        return r;
-                    }
-                    traced = pooledTraces(traced, extra);
+            ScatteredEmissionOptions more = o.emission;
+            more.photons = adaptiveExtraPhotons(medianVarianceOverCamera(traced.variance, signal, 0.9, darkElectrons, detector.readNoiseElectrons),
+                                                *o.noiseRatio, kMostTracedFactor, traced.photons);
+            if (*more.photons > 0) {
+                const ScatteredEmissionImage extra = traceScatteredEmission(scene, tracer, imaging, covered, *emissionPoints, field.get(), detection,
+                                                                            detector.exposureS, more, o.seed, mixBits(streamKey + kAdaptiveStreams),
+                                                                            o.threads, o.cancel);
+                if (!extra.complete) {
+                    r.complete = false;
+                    return r;
                 }
+                traced = pooledTraces(traced, extra);
             }
         }
         r.emissionPhotons = traced.photons;
@@ -319,8 +328,6 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
             for (auto& image : levels) image.assign(r.electrons.size(), 0.0);
     }
     std::vector<double> largestInPixel(r.electrons.size(), 0.0);  // largest per-pixel path sample
-    // Dark electrons of the exposure: part of the camera noise an adaptive target is relative to.
-    const double darkElectrons = detector.darkCurrentElectronsPerS * detector.exposureS;
     int rowsDone = 0;
     std::mutex progressMutex;  // the callback is called from one thread at a time
     parallelFor(static_cast<size_t>(height), o.threads, [&](size_t yRow) {

@@ -120,7 +120,7 @@ double sampleGamma(double shape, double scale, Rng& rng);
 double sampleStandardNormal(Rng& rng);
 
 // The median, over the pixels at or above the `quantile` of `signal` (e⁻), of variance / (signal + dark +
-// read²): a Monte Carlo part's noise against the camera's, as the adaptive mode and the summary judge it.
+// read²): a Monte Carlo part's noise against the camera's, as the adaptive mode judges its field and photons.
 double medianVarianceOverCamera(const std::vector<double>& variance, const std::vector<double>& signal, double quantile, double darkElectrons,
                                 double readNoiseElectrons);
 

@@ -34,7 +34,6 @@ struct ScatteredEmissionOptions {
     double photonsPerPixel = 4;
     uint64_t photonsFor(size_t pixels) const;
     int directions = 4;                    // per vertex imaged, pooled or not
-
     void validate() const;                 // ConfigError naming the field and value
 };
 

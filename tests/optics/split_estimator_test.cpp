@@ -206,14 +206,9 @@ TEST(SplitEstimator, TheTracedScatteredEmissionDoesNotDependOnTheThreadCount) {
 // it then discards, so its mean is that of the fixed-spp estimator; it spends the paths where the
 // noise is, and a target every pixel meets at `spp` changes nothing.
 double medianMcOverCamera(const optics::PlaneImage& r) {
-    std::vector<double> e = r.electrons;
-    std::sort(e.begin(), e.end());
-    const double cut = e[static_cast<size_t>(0.9 * (e.size() - 1))];
-    std::vector<double> ratio;
-    for (size_t i = 0; i < r.electrons.size(); ++i)
-        if (r.electrons[i] >= cut) ratio.push_back(r.stderrElectrons[i] * r.stderrElectrons[i] / (r.electrons[i] + 0.05 + 1.4 * 1.4));
-    std::nth_element(ratio.begin(), ratio.begin() + static_cast<std::ptrdiff_t>(ratio.size() / 2), ratio.end());
-    return ratio[ratio.size() / 2];
+    std::vector<double> variance(r.stderrElectrons.size());
+    for (size_t i = 0; i < variance.size(); ++i) variance[i] = r.stderrElectrons[i] * r.stderrElectrons[i];
+    return optics::medianVarianceOverCamera(variance, r.electrons, 0.9, 0.05, 1.4);
 }
 
 TEST(AdaptiveSampling, KeepsTheMeanAndSpendsPathsWhereTheNoiseIs) {
