@@ -26,6 +26,7 @@ struct AcquireRequest {
     std::vector<std::string> channels;  // names to acquire (default: all)
     std::optional<std::string> exposure;  // a time ("20 ms"), or "auto" / "auto:F" (autoExpose at F of the full well, 0.5 by default)
     std::optional<int64_t> fieldPhotons;   // the excitation field's photons per beam line side and plane (0: off)
+    std::optional<double> fieldMarginUm, fieldReachUm;  // how far it reaches beyond the computed region and from the focal plane
     std::optional<int64_t> emissionPhotons;  // the scattered emission's photons per plane and channel (0: paths carry it)
 };
 
@@ -74,6 +75,11 @@ inline void checkAcquireRequest(const AcquireRequest& a) {
     parseExposure(a.exposure);
     if (a.fieldPhotons && (*a.fieldPhotons < 0 || *a.fieldPhotons == 1 || *a.fieldPhotons > (int64_t(1) << 40)))
         throw ConfigError("--field-photons: must be 0 (no field) or lie in [2, 2^40], got " + std::to_string(*a.fieldPhotons));
+    // At most 10 mm: the field's grids grow with the box.
+    if (a.fieldMarginUm && (!(*a.fieldMarginUm >= 0) || !(*a.fieldMarginUm <= 1e4)))
+        throw ConfigError("--field-margin-um: must lie in [0, 10000], got " + std::to_string(*a.fieldMarginUm));
+    if (a.fieldReachUm && (!(*a.fieldReachUm >= 0) || !(*a.fieldReachUm <= 1e4)))
+        throw ConfigError("--field-reach-um: must lie in [0, 10000], got " + std::to_string(*a.fieldReachUm));
     if (a.emissionPhotons && (*a.emissionPhotons < 0 || *a.emissionPhotons == 1 || *a.emissionPhotons > (int64_t(1) << 40)))
         throw ConfigError("--emission-photons: must be 0 (paths carry the scattered emission) or lie in [2, 2^40], got " + std::to_string(*a.emissionPhotons));
 }
@@ -117,6 +123,8 @@ inline AcquireOptions applyAcquireRequest(const AcquireRequest& a, const Scene& 
     if (o.noiseRatio) o.maxSpp = std::max(o.maxSpp, o.spp);
     o.threads = a.threads;
     if (a.fieldPhotons) o.field.photons = static_cast<uint64_t>(*a.fieldPhotons);
+    if (a.fieldMarginUm) o.field.marginUm = *a.fieldMarginUm;
+    if (a.fieldReachUm) o.field.reachUm = *a.fieldReachUm;
     if (a.emissionPhotons) o.emission.photons = static_cast<uint64_t>(*a.emissionPhotons);
     return o;
 }

@@ -46,6 +46,10 @@ void ExcitationFieldOptions::validate() const {
     if (lateralUm != 0) positive(lateralUm, "lateral spacing (um)");
     positive(axialUm, "axial spacing (um)");
     positive(halfDepthUm, "half depth (um)");
+    if (!(marginUm >= 0) || !std::isfinite(marginUm)) throw ConfigError("excitation field margin (um) must be >= 0 and finite, got " + std::to_string(marginUm));
+    if (!(reachUm >= 0) || !std::isfinite(reachUm)) throw ConfigError("excitation field reach (um) must be >= 0 and finite, got " + std::to_string(reachUm));
+    positive(coarseAxialUm, "coarse axial spacing (um)");
+    positive(coarseLateralUm, "coarse lateral spacing (um)");
     if (photons == 1 || photons > (uint64_t(1) << 40)) throw ConfigError("excitation field photons must be 0 or lie in [2, 2^40], got " + std::to_string(photons));
 }
 
@@ -54,9 +58,9 @@ void AcquireOptions::validate() const {
     if (threads < 0) throw ConfigError("threads must be >= 0, got " + std::to_string(threads));
     if (noiseRatio && !(*noiseRatio > 0 && std::isfinite(*noiseRatio)))
         throw ConfigError("noise ratio must be positive and finite, got " + std::to_string(*noiseRatio));
-    if (noiseRatio && (maxSpp < spp || pilotSpp < 2))
-        throw ConfigError("adaptive sampling needs max spp >= spp and at least 2 pilot samples, got max " + std::to_string(maxSpp) + ", spp " +
-                          std::to_string(spp) + ", pilot " + std::to_string(pilotSpp));
+    if (noiseRatio && (maxSpp < spp || firstPilotSpp < 2 || pilotSpp < firstPilotSpp))
+        throw ConfigError("adaptive sampling needs max spp >= spp and 2 <= first pilot samples <= pilot samples, got max " + std::to_string(maxSpp) +
+                          ", spp " + std::to_string(spp) + ", pilot " + std::to_string(firstPilotSpp) + " then " + std::to_string(pilotSpp));
     if (!(poolingFraction >= 0 && poolingFraction <= 1)) throw ConfigError("pooling fraction must lie in [0, 1], got " + std::to_string(poolingFraction));
     if (labels && labelCount < 1) throw ConfigError("a label tally needs at least one label");
     unscattered.validate();
@@ -78,6 +82,7 @@ public:
         : imaging_(imaging), computed_(computed), emission_(emission && !emission->empty() ? emission : nullptr), pixelPoint_(pixelPoint),
           poolingFraction_(poolingFraction), traced_(traced) {}
     bool tracesFieldLitEmission(int medium) const override { return traced_ && traced_->tracesFieldLit(medium); }
+    bool tracesBeamLitEmissionAt(const Vec3& y, int medium) const override { return traced_ && traced_->tracesBeamLit(y, medium); }
     SampledSpectrum firstVertexWeight(const Vec3& y, const SampledWavelengths& wl) const override {
         return imaging_.firstVertexWeight(pixelPoint_, y, wl);
     }
@@ -395,15 +400,22 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
             };
             int n = o.spp;
             if (o.noiseRatio) {
-                // Pilot paths from streams the estimate never uses decide how many to trace.
+                // Pilot paths from streams the estimate never uses decide how many to trace: the first few, and
+                // the rest of them where those ask for more than spp.
                 PixelTally pilot;
-                for (int s = 0; s < o.pilotSpp; ++s) pilot.add(pathSample(kPilotSample + static_cast<uint64_t>(s)).total);
-                const double signal = std::max(0.0, pilot.mean() + computed[pixel]);
-                const double target = sqr(*o.noiseRatio) * (signal + darkElectrons + sqr(detector.readNoiseElectrons));
-                const double perPath = pilot.varianceOfMean() * pilot.n;
-                const double wanted = std::ceil(perPath / target);
-                n = static_cast<int>(std::clamp(wanted, double(o.spp), double(o.maxSpp)));
-                row.pilots += static_cast<uint64_t>(o.pilotSpp);
+                int drawn = 0;
+                auto drawPilots = [&](int upTo) {
+                    for (; drawn < upTo; ++drawn) pilot.add(pathSample(kPilotSample + static_cast<uint64_t>(drawn)).total);
+                };
+                auto wanted = [&] {
+                    const double signal = std::max(0.0, pilot.mean() + computed[pixel]);
+                    const double target = sqr(*o.noiseRatio) * (signal + darkElectrons + sqr(detector.readNoiseElectrons));
+                    return std::ceil(pilot.varianceOfMean() * pilot.n / target);
+                };
+                drawPilots(o.firstPilotSpp);
+                if (wanted() > o.spp) drawPilots(o.pilotSpp);
+                n = static_cast<int>(std::clamp(wanted(), double(o.spp), double(o.maxSpp)));
+                row.pilots += static_cast<uint64_t>(drawn);
             }
             std::array<PixelTally, kImageLevels> pooled;
             for (int s = 0; s < n; ++s) {
@@ -594,6 +606,12 @@ std::unique_ptr<const BeamExcitationField> traceExcitationField(const Scene& sce
     box.halfX = 0.5 * g.regionWidth() * g.pixelMm;
     box.halfY = 0.5 * g.regionHeight() * g.pixelMm;
     box.halfZ = std::max(g.halfDepthMm(), o.field.halfDepthUm * 1e-3);
+    // Beyond them, out to the margin and the reach, the far grid.
+    box.farHalfX = box.halfX + o.field.marginUm * 1e-3;
+    box.farHalfY = box.halfY + o.field.marginUm * 1e-3;
+    box.farHalfZ = o.field.reachUm * 1e-3;
+    box.farHz = o.field.coarseAxialUm * 1e-3;
+    box.farHxy = o.field.coarseLateralUm * 1e-3;
     box.hx = box.hy = o.field.lateralUm > 0 ? o.field.lateralUm * 1e-3 : fieldLateralSpacingMm(scene, lines, box);
     box.hz = o.field.axialUm * 1e-3;
     FluenceOptions fo;

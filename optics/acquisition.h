@@ -50,6 +50,15 @@ struct ExcitationFieldOptions {
     double lateralUm = 0;
     double axialUm = 0.5;       // node spacing along the axis (across a light sheet)
     double halfDepthUm = 20;    // how far from the focal plane it reaches (at least the computed region)
+    // How far beyond the computed region it reaches along the focal plane. There the traced photons carry the
+    // emission the sheets excite, which reaches the image only by scattering: the camera paths would find it
+    // by chance, with the sheet's irradiance as weight (docs/model.md, "The excitation field").
+    double marginUm = 100;
+    // Beyond halfDepthUm it reaches out to reachUm from the focal plane, and beyond the region out to the
+    // margin, on far nodes: the light that excites the dye the objective sees out of focus or only after
+    // scattering, which the camera paths would otherwise find by sub-paths that reach the sheet by chance.
+    double reachUm = 120;
+    double coarseAxialUm = 4, coarseLateralUm = 16;  // the far nodes' spacing (laterally at least lateralUm's)
     void validate() const;      // ConfigError naming the option and value
 };
 
@@ -67,11 +76,13 @@ struct AcquireOptions {
     PsfTableOptions psf;             // the PSF's cut and table resolution
     // Adaptive sampling to a noise target: each pixel traces as many paths (spp at least, maxSpp at
     // most) as bring its Monte Carlo standard error to `noiseRatio` times the camera's noise of its
-    // expected signal, √(signal + dark + read²). The number is decided from `pilotSpp` separate pilot
-    // paths that the estimate does not use, so the stopping rule does not bias the mean.
+    // expected signal, √(signal + dark + read²). The number is decided from separate pilot paths that the
+    // estimate does not use, so the stopping rule does not bias the mean: `firstPilotSpp` of them, and
+    // `pilotSpp` in all where those ask for more than spp (with the field and the traced emission the paths
+    // hold little of the noise, and 16 pilots a pixel cost eight times the paths they decided on).
     std::optional<double> noiseRatio;
     int maxSpp = 4096;
-    int pilotSpp = 16;
+    int firstPilotSpp = 4, pilotSpp = 16;
     uint64_t seed = 1;
     // Tally the paths' re-emissions by label (PlaneImage::labelledElectrons, `labelCount` keys), pooled as
     // the total is: for fits of the scattered light. The scattered emission is then left to the paths (the

@@ -68,7 +68,7 @@ WavelengthSampler emissionWavelengths(const Scene& scene, const std::function<do
 class DyeCells {
 public:
     DyeCells(const Scene& scene, const PathTracer& tracer, const BeamExcitationField& field, const std::vector<double>& lines,
-             const std::function<double(double)>& detection)
+             const std::function<double(double)>& detection, const Imaging& imaging)
         : scene_(scene) {
         std::vector<Cell> cells;
         std::vector<Vec3> centres;
@@ -183,8 +183,14 @@ public:
             meanPhi += phi[i] / static_cast<double>(cells.size());
         }
         if (!(meanPhi > 0)) return;
+        // Cells beyond the field of view draw fewer photons, fewer the farther out (1 / (1 + d / kReachMm)):
+        // what they send reaches the image only by scattering, the more seldom the farther.
+        constexpr double kReachMm = 0.02;
+        const double halfWidth = 0.5 * imaging.width() * imaging.pixelMm(), halfHeight = 0.5 * imaging.height() * imaging.pixelMm();
         for (size_t i = 0; i < cells.size(); ++i) {
-            cells[i].weight *= (phi[i] + meanPhi) * cells[i].volumeMm3;
+            const Imaging::Local q = imaging.local(centres[i]);
+            const double beyond = std::hypot(std::max(0.0, std::abs(q.x) - halfWidth), std::max(0.0, std::abs(q.y) - halfHeight));
+            cells[i].weight *= (phi[i] + meanPhi) * cells[i].volumeMm3 / (1 + beyond / kReachMm);
             total_ += cells[i].weight;
             cdf_.push_back(total_);
         }
@@ -396,7 +402,7 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
     // and the field-lit one); the lattice's points carry the computed emission of other media, if any.
     std::optional<DyeCells> fieldLit;
     if (field && !field->fields().empty()) {
-        fieldLit.emplace(scene, tracer, *field, tracer.lineWavelengths(), detection);
+        fieldLit.emplace(scene, tracer, *field, tracer.lineWavelengths(), detection, imaging);
         if (fieldLit->empty()) fieldLit.reset();
     }
     bool latticeNeeded = !fieldLit;
@@ -406,7 +412,10 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
     const uint64_t latticePhotons = photons - fieldPhotons;
     const uint64_t latticePoints = (latticePhotons + kPhotonsPerPoint - 1) / kPhotonsPerPoint;
     const uint64_t fieldPoints = (fieldPhotons + kPhotonsPerPoint - 1) / kPhotonsPerPoint;
-    if (fieldLit) out.fieldLitMedia = fieldLit->media();
+    if (fieldLit) {
+        out.fieldLitMedia = fieldLit->media();
+        out.beamLitBox = field->fields().front().reach();
+    }
     out.fieldLitMedia.resize(scene.media.size(), false);
     std::atomic<bool> stopped{false};
     parallelFor(kSlots, threads, [&](size_t s) {
@@ -453,6 +462,8 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
             for (size_t l = 0; l < lines.size(); ++l) {
                 excitation[l] = computed ? tracer.coreMeanRadiance(p, medium, lines[l], field, rng) : 0.0;
                 beyond[l] = fromLattice ? 0.0 : field->scatteredMeanRadiance(p, lines[l], computed ? 0.0 : 1.0, 1.0).value_or(0.0);
+                // Beyond the computed part, inside the field's box, the beams' core emission is the photons' too.
+                if (!fromLattice && !computed && out.tracesBeamLit(p, medium)) beyond[l] += tracer.coreMeanRadiance(p, medium, lines[l], nullptr, rng);
                 lit = excitation[l] + beyond[l] > 0 || lit;
             }
             if (!lit) continue;
@@ -541,6 +552,7 @@ ScatteredEmissionImage pooledTraces(const ScatteredEmissionImage& a, const Scatt
     out.photons = a.photons + b.photons;
     out.vertices = a.vertices + b.vertices;
     out.fieldLitMedia = a.fieldLitMedia;
+    out.beamLitBox = a.beamLitBox;
     out.seconds = a.seconds + b.seconds;
     out.complete = a.complete && b.complete;
     return out;

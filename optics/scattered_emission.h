@@ -48,6 +48,10 @@ struct ScatteredEmissionImage {
     // The media whose field-lit emission the photons carry (by index; empty when none).
     std::vector<bool> fieldLitMedia;
     bool tracesFieldLit(int medium) const { return medium >= 0 && static_cast<size_t>(medium) < fieldLitMedia.size() && fieldLitMedia[static_cast<size_t>(medium)]; }
+    // Where the photons also carry the beams' core emission beyond the computed part (the field's box) in
+    // the media whose field-lit emission they carry.
+    std::optional<FieldBox> beamLitBox;
+    bool tracesBeamLit(const Vec3& y, int medium) const { return beamLitBox && tracesFieldLit(medium) && beamLitBox->contains(y); }
     double seconds = 0;
     bool complete = true;
 };

@@ -5,12 +5,12 @@
 # the brightest 10 % of pixels, the measure, and over the brightest 1 %: the neurites cover only
 # a few per cent of the field, so in clear tissue the brightest 10 % include pixels with no signal at
 # all, equal in both renders). Tissues: clear, the sample's (sigma_s 1 /mm), sigma_s 2 /mm and uncleared
-# cortex (sigma_s 20 /mm, g 0.9). Estimators: camera paths carrying the scattered emission with the field
-# at 50 000 photons (--emission-photons 0 --field-photons 50000, 4 paths per pixel: the default until the
-# thirteenth session); the default (the scattered emission traced forward, 2^18 photons per plane and
-# channel with each vertex in 4 directions since the fourteenth session, the field at 200 000, 2 paths per
-# pixel as README command 1 runs); the default adaptively (the paths and, since the fourteenth session,
-# the traced photons).
+# cortex (sigma_s 20 /mm, g 0.9). Estimators: the fourteenth session's default, the field only over the
+# computed region (--field-margin-um 0 --field-reach-um 0); the default (the scattered emission traced
+# forward, 2^18 photons per plane and channel with each vertex in 4 directions, the field at 200 000 photons
+# reaching 100 um beyond the computed region and 120 um from the focal plane, where the photons carry the
+# dye's light, 2 paths per pixel as README command 1 runs); the default adaptively (the paths, the traced
+# photons and the field).
 # The last three columns give the first seed's noise budget (the summary's `noise_budget`: each part's own
 # median noise variance over the camera's, brightest 10 % / brightest 1 %).
 # Usage: scripts/noise-vs-time.sh [build/apps/fluorosim] > table.md
@@ -70,7 +70,7 @@ PY
 }
 for tissue in "clear:$work/clear.json" "sigma_s 1 /mm:$scene" "sigma_s 2 /mm:$work/s2.json" "cortex, sigma_s 20 /mm:$work/cortex.json"; do
     tag=${tissue%%:*} file=${tissue#*:}
-    run "$tag" "$file" "paths carry the scattered emission, field 50 000 (earlier default)" 4 --emission-photons 0 --field-photons 50000
-    run "$tag" "$file" "default: traced emission 2^18 × 4 directions, field 200 000" 2
-    [ "$tag" = "cortex, sigma_s 20 /mm" ] || run "$tag" "$file" "default, --noise-ratio 0.5 --max-spp 64" 2 --noise-ratio 0.5 --max-spp 64
+    run "$tag" "$file" "field over the computed region only (fourteenth session's default)" 2 --field-margin-um 0 --field-reach-um 0
+    run "$tag" "$file" "default: field margin 100 um, reach 120 um" 2
+    run "$tag" "$file" "default, --noise-ratio 0.5 --max-spp 64" 2 --noise-ratio 0.5 --max-spp 64
 done

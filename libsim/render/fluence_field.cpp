@@ -1,6 +1,7 @@
 #include "render/fluence_field.h"
 
 #include <algorithm>
+#include <limits>
 #include <chrono>
 #include <cmath>
 
@@ -151,6 +152,19 @@ bool FieldBox::contains(const Vec3& p) const {
     return std::abs(dot(d, right)) <= halfX && std::abs(dot(d, up)) <= halfY && std::abs(dot(d, axis)) <= halfZ;
 }
 
+FieldBox FieldBox::far() const {
+    if (!hasFar()) return *this;
+    FieldBox b = *this;
+    b.halfX = std::max(halfX, farHalfX);
+    b.halfY = std::max(halfY, farHalfY);
+    b.halfZ = std::max(halfZ, farHalfZ);
+    b.hx = std::max(hx, farHxy);
+    b.hy = std::max(hy, farHxy);
+    b.hz = farHz;
+    b.farHalfX = b.farHalfY = b.farHalfZ = 0;
+    return b;
+}
+
 void FieldBox::validate() const {
     auto positive = [](double v, const char* what) {
         if (!(v > 0) || !std::isfinite(v)) throw ConfigError(std::string("excitation field: ") + what + " must be positive and finite, got " + number(v));
@@ -161,6 +175,12 @@ void FieldBox::validate() const {
     positive(hx, "node spacing along x");
     positive(hy, "node spacing along y");
     positive(hz, "node spacing along the axis");
+    for (double v : {farHalfX, farHalfY, farHalfZ})
+        if (!(v >= 0) || !std::isfinite(v)) throw ConfigError("excitation field: a far half extent must be >= 0 and finite, got " + number(v));
+    if (hasFar()) {
+        positive(farHz, "far node spacing along the axis");
+        positive(farHxy, "far node spacing along the focal plane");
+    }
 }
 
 FluenceGrid::FluenceGrid(const FieldBox& box) : box_(box) {
@@ -205,34 +225,38 @@ void FluenceGrid::deposit(const Vec3& a, const Vec3& b, double weight) {
         t1 = std::min(t1, tb);
     }
     if (!(t1 > t0)) return;
-    // Break at every node plane crossed, so that each piece lies in one cell.
-    std::vector<double> breaks{t0, t1};
+    // Walk the node planes crossed in order (the next crossing on each axis), so that each piece lies in one cell.
+    std::array<double, 3> plane{}, next{};
     for (size_t k = 0; k < 3; ++k) {
+        next[k] = std::numeric_limits<double>::infinity();
         if (std::abs(du[k]) < 1e-300) continue;
-        const double ua = u0[k] + t0 * du[k], ub = u0[k] + t1 * du[k];
-        for (double c = std::ceil(std::min(ua, ub)); c < std::max(ua, ub); c += 1) {
-            const double t = (c - u0[k]) / du[k];
-            if (t > t0 && t < t1) breaks.push_back(t);
-        }
+        const double ua = u0[k] + t0 * du[k];
+        plane[k] = du[k] > 0 ? std::floor(ua) + 1 : std::ceil(ua) - 1;
+        next[k] = (plane[k] - u0[k]) / du[k];
     }
-    std::sort(breaks.begin(), breaks.end());
     static const double kGauss = 1 / std::sqrt(3.0);
-    for (size_t i = 0; i + 1 < breaks.size(); ++i) {
-        const double ta = breaks[i], tb = breaks[i + 1];
-        if (!(tb > ta)) continue;
-        const double mid = 0.5 * (ta + tb), half = 0.5 * (tb - ta);
-        std::array<int, 3> cell{};
-        for (size_t k = 0; k < 3; ++k) cell[k] = std::clamp(static_cast<int>(std::floor(u0[k] + mid * du[k])), 0, n_[k] - 2);
-        const double w = weight * half * lengthMm;  // each Gauss point's share
-        for (double g : {-kGauss, kGauss}) {
-            const double t = mid + g * half;
-            std::array<double, 3> f{};
-            for (size_t k = 0; k < 3; ++k) f[k] = std::clamp(u0[k] + t * du[k] - cell[k], 0.0, 1.0);
-            for (int c = 0; c < 8; ++c) {
-                const double wx = c & 1 ? f[0] : 1 - f[0], wy = c & 2 ? f[1] : 1 - f[1], wz = c & 4 ? f[2] : 1 - f[2];
-                values_[index(cell[0] + (c & 1), cell[1] + ((c >> 1) & 1), cell[2] + ((c >> 2) & 1))] += w * wx * wy * wz;
+    for (double ta = t0;;) {
+        const size_t k = next[0] <= next[1] ? (next[0] <= next[2] ? 0 : 2) : (next[1] <= next[2] ? 1 : 2);
+        const double tb = std::min(next[k], t1);
+        if (tb > ta) {
+            const double mid = 0.5 * (ta + tb), half = 0.5 * (tb - ta);
+            std::array<int, 3> cell{};
+            for (size_t q = 0; q < 3; ++q) cell[q] = std::clamp(static_cast<int>(std::floor(u0[q] + mid * du[q])), 0, n_[q] - 2);
+            // The corners' hat weights summed over both Gauss points, each point's share half × length.
+            std::array<double, 8> corner{};
+            for (double g : {-kGauss, kGauss}) {
+                const double t = mid + g * half;
+                std::array<double, 3> f{};
+                for (size_t q = 0; q < 3; ++q) f[q] = std::clamp(u0[q] + t * du[q] - cell[q], 0.0, 1.0);
+                for (int c = 0; c < 8; ++c) corner[static_cast<size_t>(c)] += (c & 1 ? f[0] : 1 - f[0]) * (c & 2 ? f[1] : 1 - f[1]) * (c & 4 ? f[2] : 1 - f[2]);
             }
+            const double w = weight * half * lengthMm;
+            for (int c = 0; c < 8; ++c) values_[index(cell[0] + (c & 1), cell[1] + ((c >> 1) & 1), cell[2] + ((c >> 2) & 1))] += w * corner[static_cast<size_t>(c)];
+            ta = tb;
         }
+        if (!(next[k] < t1)) break;
+        plane[k] += du[k] > 0 ? 1 : -1;
+        next[k] = (plane[k] - u0[k]) / du[k];
     }
 }
 
@@ -294,6 +318,7 @@ BeamFluence pooledFluence(const BeamFluence& a, const BeamFluence& b) {
     };
     pool(out.mean, b.mean);
     for (int k = 0; k < 2; ++k) pool(out.half[k], b.half[k]);
+    if (out.far && b.far) pool(*out.far, *b.far);
     out.stats.photons += b.stats.photons;
     out.stats.sourced += b.stats.sourced;
     out.stats.truncated += b.stats.truncated;
@@ -341,17 +366,45 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
     const AxisSource axis(scene, profile, line.side, lambda);
     const bool rouletteAllowed = largestExtinctionAt(scene, lambda) * kRouletteMarginMm <= kRouletteOpticalMargin;
     const FluenceGrid empty(box);
-    requireMemory(8.0 * static_cast<double>(empty.nodes()) * (kSlots + 3), "the excitation field's grids");
+    const FieldBox reach = box.far();
+    const std::optional<FluenceGrid> emptyFar = box.hasFar() ? std::optional<FluenceGrid>(FluenceGrid(reach)) : std::nullopt;
+    requireMemory(8.0 * static_cast<double>(empty.nodes() + (emptyFar ? emptyFar->nodes() : 0)) * (kSlots + 3), "the excitation field's grids");
     std::vector<FluenceGrid> slots(kSlots, empty);
+    std::vector<std::optional<FluenceGrid>> farSlots(kSlots, emptyFar);
     struct SlotStats {
         uint64_t sourced = 0, truncated = 0;
         double source = 0;
     };
     std::vector<SlotStats> slotStats(kSlots);
-    const double boxReach = length(Vec3(box.halfX, box.halfY, box.halfZ));
+    const double boxReach = length(Vec3(reach.halfX, reach.halfY, reach.halfZ));
     const uint64_t seedKey = 0x666c75656e6365ULL ^ static_cast<uint64_t>(std::llround(lambda * 1000)) ^ (static_cast<uint64_t>(line.side) << 40);
 
-    auto tracePhoton = [&](uint64_t index, FluenceGrid& grid, SlotStats& st) {
+    // The far grid is read only beyond the fine box, where its nodes' hats reach at most two far nodes into
+    // it: a segment's piece deeper inside is left out of it (most of the tracks near the sheet lie there).
+    const std::array<Vec3, 3> frame{box.axis, box.right, box.up};
+    const std::array<double, 3> skip{box.halfZ - 2 * reach.hz, box.halfX - 2 * reach.hx, box.halfY - 2 * reach.hy};
+    auto depositFar = [&](FluenceGrid& far, const Vec3& a, const Vec3& b, double w) {
+        double t0 = 0, t1 = 1;  // the piece inside the skipped box
+        for (size_t k = 0; k < 3 && t0 < t1; ++k) {
+            const double ua = dot(a - box.centre, frame[k]), ub = dot(b - box.centre, frame[k]);
+            if (!(skip[k] > 0)) t1 = -1;
+            else if (std::abs(ub - ua) < 1e-300) {
+                if (!(std::abs(ua) < skip[k])) t1 = -1;
+            } else {
+                double ta = (-skip[k] - ua) / (ub - ua), tb = (skip[k] - ua) / (ub - ua);
+                if (ta > tb) std::swap(ta, tb);
+                t0 = std::max(t0, ta);
+                t1 = std::min(t1, tb);
+            }
+        }
+        if (!(t1 > t0)) {
+            far.deposit(a, b, w);
+            return;
+        }
+        if (t0 > 0) far.deposit(a, a + (b - a) * t0, w);
+        if (t1 < 1) far.deposit(a + (b - a) * t1, b, w);
+    };
+    auto tracePhoton = [&](uint64_t index, FluenceGrid& grid, std::optional<FluenceGrid>& farGrid, SlotStats& st) {
         Rng rng = Rng::forKey(options.seed, index, seedKey);
         Vec3 onAxis;
         double pdfAxis = 0;
@@ -378,12 +431,12 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
         st.source += weight;
         double pdf = 0;
         Ray ray{y, med->phase().sample(d, rng.uniform(), rng.uniform(), &pdf)};
-        // Russian roulette on photons heading away from the box beyond kRouletteMarginMm of it (where allowed):
+        // Russian roulette on photons heading away from the reach beyond kRouletteMarginMm of it (where allowed):
         // they seldom come back, and their walk out of the tissue is a fifth of the field's time (README planes).
         auto roulette = [&](const Vec3& p, const Vec3& dir) {
-            const Vec3 r = p - box.centre;
-            const double ox = std::max(0.0, std::abs(dot(r, box.right)) - box.halfX), oy = std::max(0.0, std::abs(dot(r, box.up)) - box.halfY),
-                         oz = std::max(0.0, std::abs(dot(r, box.axis)) - box.halfZ);
+            const Vec3 r = p - reach.centre;
+            const double ox = std::max(0.0, std::abs(dot(r, reach.right)) - reach.halfX), oy = std::max(0.0, std::abs(dot(r, reach.up)) - reach.halfY),
+                         oz = std::max(0.0, std::abs(dot(r, reach.axis)) - reach.halfZ);
             if (!rouletteAllowed || ox * ox + oy * oy + oz * oz <= kRouletteMarginMm * kRouletteMarginMm || dot(dir, r) < 0) return true;
             if (rng.uniform() >= kRouletteSurvival) return false;
             weight /= kRouletteSurvival;
@@ -421,6 +474,7 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
                 }
             }
             grid.deposit(ray.o, ray.at(end), weight);
+            if (farGrid) depositFar(*farGrid, ray.o, ray.at(end), weight);
             if (collided) {
                 const Vec3 p = ray.at(end);
                 const MediumSample c = med->spectra(wl).at(ch.data());
@@ -465,7 +519,7 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
                 stopped = true;
                 return;
             }
-            tracePhoton(i, slots[slot], slotStats[slot]);
+            tracePhoton(i, slots[slot], farSlots[slot], slotStats[slot]);
         }
     });
 
@@ -482,15 +536,25 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
     out.mean.add(out.half[0]);
     out.mean.add(out.half[1]);
     out.mean.scale(0.5);
+    if (emptyFar) {
+        out.far = emptyFar;
+        for (const std::optional<FluenceGrid>& f : farSlots) out.far->add(*f);
+        out.far->normalise(static_cast<double>(options.photons));
+    }
     out.stats.complete = !stopped;
     out.stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return out;
 }
 
+double BeamFluence::at(const Vec3& y) const {
+    if (mean.box().contains(y) || !far) return mean.at(y);
+    return far->at(y);
+}
+
 bool BeamExcitationField::contains(const Vec3& y) const {
     if (fields_.empty()) return false;
     for (const BeamFluence& f : fields_)
-        if (!f.mean.box().contains(y)) return false;
+        if (!f.reach().contains(y)) return false;
     return true;
 }
 
@@ -507,7 +571,7 @@ std::optional<double> BeamExcitationField::scatteredMeanRadiance(const Vec3& y, 
     for (const BeamFluence& f : fields_) {
         if (f.line.lambdaNm != lambdaNm) continue;
         const double w = f.line.profile->inCore(y, f.line.side, lambdaNm) ? coreWeight : outsideWeight;
-        if (w > 0) total += w * f.mean.at(y);
+        if (w > 0) total += w * f.at(y);
     }
     return total * kInv4Pi;
 }

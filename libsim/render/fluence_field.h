@@ -23,12 +23,18 @@
 namespace fluorosim {
 
 // A box in a frame: |x| <= halfX along `right`, |y| <= halfY along `up`, |z| <= halfZ along `axis`, from
-// `centre` (mm), with node spacings hx, hy, hz (mm).
+// `centre` (mm), with node spacings hx, hy, hz (mm). With a far half extent beyond the box's, the field
+// also reaches out to |x| <= farHalfX, |y| <= farHalfY, |z| <= farHalfZ on coarser nodes (farHz along the
+// axis, farHxy along the others but not finer than hx and hy), where its light only reaches the image after
+// scattering or far out of focus.
 struct FieldBox {
     Vec3 centre, right{1, 0, 0}, up{0, 1, 0}, axis{0, 0, 1};
     double halfX = 0, halfY = 0, halfZ = 0;
     double hx = 0.004, hy = 0.004, hz = 0.0005;
-    bool contains(const Vec3& p) const;
+    double farHalfX = 0, farHalfY = 0, farHalfZ = 0, farHz = 0.004, farHxy = 0.016;
+    bool contains(const Vec3& p) const;  // the fine box
+    bool hasFar() const { return farHalfX > halfX || farHalfY > halfY || farHalfZ > halfZ; }
+    FieldBox far() const;     // the far box on the far spacing (itself without one)
     void validate() const;  // ConfigError naming the field and value
 };
 
@@ -102,12 +108,16 @@ struct FluenceStats {
     bool complete = true;
 };
 
-// The scattered light of one beam line side: φ in each half of the photons (even and odd slots).
+// The scattered light of one beam line side: φ in each half of the photons (even and odd slots), and
+// beyond the fine box, with FieldBox::hasFar, φ of all of them on the far box's nodes.
 struct BeamFluence {
     BeamLineSide line;
     FluenceGrid half[2];
     FluenceGrid mean;  // (half[0] + half[1]) / 2
     FluenceStats stats;
+    std::optional<FluenceGrid> far;
+    const FieldBox& reach() const { return far ? far->box() : mean.box(); }  // where it is known
+    double at(const Vec3& y) const;  // φ at y: the fine grid's inside its box, else the far one's (0 beyond)
 };
 
 // Traces the field of one beam line side over `box`. The photons are split over a fixed number of slots,
@@ -132,7 +142,7 @@ public:
     };
     MeanAndHalfDifference scatteredWithNoise(size_t i, const Vec3& y) const;
     const std::vector<BeamFluence>& fields() const { return fields_; }
-    bool contains(const Vec3& y) const;
+    bool contains(const Vec3& y) const;  // where every field is known (their far boxes, if any)
 
 private:
     std::vector<BeamFluence> fields_;

@@ -436,8 +436,10 @@ SampledSpectrum PathTracer::fluorescence(const Vec3& p, int medium, const double
     // evaluated, not traced. Where the camera's imaging computes the emission, it holds both inside the
     // beams' cores, which take the start weight.
     // Where the microscope traces the covered emission forward, no branch counts it.
-    if (startBeam.traced && startBeam.traced->computesUnscatteredAt(p)) startBeam = {startBeam.traced, 0.0, startBeam.traced};
-    const double coreWeight = startBeam.imaging && startBeam.imaging->computesUnscatteredAt(p) ? startBeam.weight : 1.0;
+    // Beyond the computed part, where the microscope traces the beams' emission too, no branch counts it either.
+    const bool tracedBeyond = startBeam.traced && startBeam.traced->tracesBeamLitEmissionAt(p, medium);
+    if (startBeam.traced && (tracedBeyond || startBeam.traced->computesUnscatteredAt(p))) startBeam = {startBeam.traced, 0.0, startBeam.traced};
+    const double coreWeight = startBeam.imaging && (tracedBeyond || startBeam.imaging->computesUnscatteredAt(p)) ? startBeam.weight : 1.0;
     std::optional<double> scattered;
     if (field && wlx.discrete && fluorescence_.model() == FluorescenceModel::Full) {
         // Where the microscope traces the field-lit emission too, the field's light is all the photons'.

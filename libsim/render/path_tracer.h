@@ -108,6 +108,10 @@ public:
     // excitation field's light excites beyond the computed part, in `medium` (no branch there counts the
     // field's light then).
     virtual bool tracesFieldLitEmission(int /*medium*/) const { return false; }
+    // With PathStart::computedEmissionTraced: whether the caller also traces the emission that the beams'
+    // unscattered light excites inside their cores at y, in `medium`, beyond the computed part (no branch
+    // there counts that light then).
+    virtual bool tracesBeamLitEmissionAt(const Vec3& /*y*/, int /*medium*/) const { return false; }
 };
 
 // The scattered light of beams at spectral lines, computed rather than sampled (render/fluence_field.h):

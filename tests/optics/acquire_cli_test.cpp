@@ -459,6 +459,8 @@ TEST(AcquireCli, BadNumbersAreRejectedNotCast) {
         {{}, {"--noise-ratio", "0.5", "--max-spp", "0"}, {"--max-spp", "[spp = 1", "0"}},
         {{}, {"--field-photons", "1"}, {"--field-photons", "[2, 2^40]", "1"}},
         {{}, {"--field-photons", "-5"}, {"--field-photons", "-5"}},
+        {{}, {"--field-margin-um", "-3"}, {"--field-margin-um", "[0, 10000]", "-3"}},
+        {{}, {"--field-reach-um", "nan"}, {"--field-reach-um", "nan"}},
         {{}, {"--emission-photons", "1"}, {"--emission-photons", "[2, 2^40]", "1"}},
         {{}, {"--emission-photons", "-3"}, {"--emission-photons", "-3"}},
     };

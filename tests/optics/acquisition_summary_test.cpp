@@ -76,7 +76,9 @@ TEST(AcquisitionSummary, TheNoiseBudgetSplitsTheVarianceByPart) {
     AcquisitionSummary single(m, stack, o);
     single.addPlane(0, 0, image);
     for (const AcquisitionSummary::Entry& e : single.entries(stack, m, std::nullopt, 1))
-        if (e.group == "noise_budget") EXPECT_EQ(e.null, e.name.rfind("paths", 0) == 0) << e.name;
+        if (e.group == "noise_budget") {
+            EXPECT_EQ(e.null, e.name.rfind("paths", 0) == 0) << e.name;
+        }
 }
 
 }  // namespace
