@@ -68,7 +68,7 @@ WavelengthSampler emissionWavelengths(const Scene& scene, const std::function<do
 class DyeCells {
 public:
     DyeCells(const Scene& scene, const PathTracer& tracer, const BeamExcitationField& field, const std::vector<double>& lines,
-             const std::function<double(double)>& detection, const Imaging& imaging)
+             const std::function<double(double)>& detection, const Imaging& imaging, int threads)
         : scene_(scene) {
         std::vector<Cell> cells;
         std::vector<Vec3> centres;
@@ -123,13 +123,25 @@ public:
             std::vector<uint64_t> keys;
             for (const auto& [key, unused] : blocks) keys.push_back(key);
             std::sort(keys.begin(), keys.end());  // the same cells in the same order whatever the grid's block order
+            std::vector<std::array<int64_t, 3>> inBox;
             for (uint64_t key : keys) {
                 const std::array<int64_t, 3> b = unpackIndexKey(key);
-                bool inBox = false;
-                for (int a = 0; a < 8 && !inBox; ++a)
-                    inBox = field.contains(volume->worldFromIndex().apply(
+                bool reached = false;
+                for (int a = 0; a < 8 && !reached; ++a)
+                    reached = field.contains(volume->worldFromIndex().apply(
                         Vec3(8.0 * b[0] + ((a & 1) ? 8.0 : 0.0), 8.0 * b[1] + (((a >> 1) & 1) ? 8.0 : 0.0), 8.0 * b[2] + (((a >> 2) & 1) ? 8.0 : 0.0))));
-                if (!inBox) continue;
+                if (reached) inBox.push_back(b);
+            }
+            // Each block's transmittances and cells on its own (in parallel), then in the keys' order.
+            struct BlockCells {
+                std::vector<double> T;
+                std::vector<Cell> cells;
+                std::vector<Vec3> centres;
+            };
+            std::vector<BlockCells> perBlock(inBox.size());
+            parallelFor(inBox.size(), threads, [&](size_t n) {
+                const std::array<int64_t, 3>& b = inBox[n];
+                BlockCells& out = perBlock[n];
                 // The voxels [8b, 8b + 8] on each axis: the corners of the block's cells.
                 IndexBox range;
                 for (int a = 0; a < 3; ++a) {
@@ -139,14 +151,13 @@ public:
                 // The beams' attenuation at the block's centre: the sheet's profile is evaluated per cell, its
                 // attenuation varies on the block's scale.
                 const Vec3 blockCentre = volume->worldFromIndex().apply(Vec3(8.0 * b[0] + 4, 8.0 * b[1] + 4, 8.0 * b[2] + 4));
-                std::vector<double> T(sides.size(), 0.0);
+                out.T.assign(sides.size(), 0.0);
                 for (size_t k = 0; k < sides.size(); ++k) {
                     const Ray back{blockCentre, -sides[k].first->direction(sides[k].second.second)};
                     const StraightLine line = traceStraightLine(scene, back, static_cast<int>(m), 0.0, std::numeric_limits<double>::infinity(),
                                                                 LineSurfaces::UntilRefraction);
-                    T[k] = quadratureTransmittance(scene, back, line.segments, SampledWavelengths::atLine(sides[k].second.first, 1.0))[0];
+                    out.T[k] = quadratureTransmittance(scene, back, line.segments, SampledWavelengths::atLine(sides[k].second.first, 1.0))[0];
                 }
-                blockTransmittance.push_back(std::move(T));
                 std::vector<std::vector<float>> voxels(med.dyes().size(), std::vector<float>(729, 0.0f));
                 for (size_t d = 0; d < med.dyes().size(); ++d) {
                     const VolumeChannel& ch = volume->channel(kFirstDyeChannel + static_cast<int>(d));
@@ -165,23 +176,32 @@ public:
                                 c += most * detected[d];
                             }
                             if (!(c > 0)) continue;
-                            cells.push_back({static_cast<int>(m), {8 * b[0] + i, 8 * b[1] + j, 8 * b[2] + k}, c, cellMm3});
-                            centres.push_back(volume->worldFromIndex().apply(Vec3(8.0 * b[0] + i + 0.5, 8.0 * b[1] + j + 0.5, 8.0 * b[2] + k + 0.5)));
-                            blockOf.push_back(blockTransmittance.size() - 1);
+                            out.cells.push_back({static_cast<int>(m), {8 * b[0] + i, 8 * b[1] + j, 8 * b[2] + k}, c, cellMm3});
+                            out.centres.push_back(volume->worldFromIndex().apply(Vec3(8.0 * b[0] + i + 0.5, 8.0 * b[1] + j + 0.5, 8.0 * b[2] + k + 0.5)));
                         }
+            });
+            for (BlockCells& block : perBlock) {
+                if (block.cells.empty()) continue;
+                blockTransmittance.push_back(std::move(block.T));
+                cells.insert(cells.end(), block.cells.begin(), block.cells.end());
+                centres.insert(centres.end(), block.centres.begin(), block.centres.end());
+                blockOf.insert(blockOf.end(), block.cells.size(), blockTransmittance.size() - 1);
             }
         }
         if (cells.empty()) return;
         std::vector<double> phi(cells.size(), 0.0);
+        constexpr size_t kChunk = 4096;
+        parallelFor((cells.size() + kChunk - 1) / kChunk, threads, [&](size_t chunk) {
+            for (size_t i = chunk * kChunk; i < std::min(cells.size(), (chunk + 1) * kChunk); ++i) {
+                // The sheets' light at the cell, attenuated as at its block's centre.
+                const std::vector<double>& T = blockTransmittance[blockOf[i]];
+                for (size_t k = 0; k < sides.size(); ++k)
+                    phi[i] += kInv4Pi * sides[k].first->irradiance(centres[i], sides[k].second.second, sides[k].second.first) * 1e6 * sidePower[k] * T[k];
+                for (double l : lines) phi[i] += field.scatteredMeanRadiance(centres[i], l, 1.0, 1.0).value_or(0.0);
+            }
+        });
         double meanPhi = 0;
-        for (size_t i = 0; i < cells.size(); ++i) {
-            // The sheets' light at the cell, attenuated as at its block's centre.
-            const std::vector<double>& T = blockTransmittance[blockOf[i]];
-            for (size_t k = 0; k < sides.size(); ++k)
-                phi[i] += kInv4Pi * sides[k].first->irradiance(centres[i], sides[k].second.second, sides[k].second.first) * 1e6 * sidePower[k] * T[k];
-            for (double l : lines) phi[i] += field.scatteredMeanRadiance(centres[i], l, 1.0, 1.0).value_or(0.0);
-            meanPhi += phi[i] / static_cast<double>(cells.size());
-        }
+        for (size_t i = 0; i < cells.size(); ++i) meanPhi += phi[i] / static_cast<double>(cells.size());
         if (!(meanPhi > 0)) return;
         // Cells beyond the field of view draw fewer photons, fewer the farther out (1 / (1 + d / kReachMm)):
         // what they send reaches the image only by scattering, the more seldom the farther.
@@ -402,7 +422,7 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
     // and the field-lit one); the lattice's points carry the computed emission of other media, if any.
     std::optional<DyeCells> fieldLit;
     if (field && !field->fields().empty()) {
-        fieldLit.emplace(scene, tracer, *field, tracer.lineWavelengths(), detection, imaging);
+        fieldLit.emplace(scene, tracer, *field, tracer.lineWavelengths(), detection, imaging, threads);
         if (fieldLit->empty()) fieldLit.reset();
     }
     bool latticeNeeded = !fieldLit;
