@@ -76,10 +76,8 @@ inline void checkAcquireRequest(const AcquireRequest& a) {
     if (a.fieldPhotons && (*a.fieldPhotons < 0 || *a.fieldPhotons == 1 || *a.fieldPhotons > (int64_t(1) << 40)))
         throw ConfigError("--field-photons: must be 0 (no field) or lie in [2, 2^40], got " + std::to_string(*a.fieldPhotons));
     // At most 10 mm: the field's grids grow with the box.
-    if (a.fieldMarginUm && (!(*a.fieldMarginUm >= 0) || !(*a.fieldMarginUm <= 1e4)))
-        throw ConfigError("--field-margin-um: must lie in [0, 10000], got " + std::to_string(*a.fieldMarginUm));
-    if (a.fieldReachUm && (!(*a.fieldReachUm >= 0) || !(*a.fieldReachUm <= 1e4)))
-        throw ConfigError("--field-reach-um: must lie in [0, 10000], got " + std::to_string(*a.fieldReachUm));
+    for (const auto& [value, option] : {std::pair{a.fieldMarginUm, "--field-margin-um"}, std::pair{a.fieldReachUm, "--field-reach-um"}})
+        if (value && (!(*value >= 0) || !(*value <= 1e4))) throw ConfigError(std::string(option) + ": must lie in [0, 10000], got " + std::to_string(*value));
     if (a.emissionPhotons && (*a.emissionPhotons < 0 || *a.emissionPhotons == 1 || *a.emissionPhotons > (int64_t(1) << 40)))
         throw ConfigError("--emission-photons: must be 0 (paths carry the scattered emission) or lie in [2, 2^40], got " + std::to_string(*a.emissionPhotons));
 }

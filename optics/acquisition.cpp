@@ -43,11 +43,14 @@ void ExcitationFieldOptions::validate() const {
     auto positive = [](double v, const char* what) {
         if (!(v > 0) || !std::isfinite(v)) throw ConfigError(std::string("excitation field ") + what + " must be positive and finite, got " + std::to_string(v));
     };
+    auto nonNegative = [](double v, const char* what) {
+        if (!(v >= 0) || !std::isfinite(v)) throw ConfigError(std::string("excitation field ") + what + " must be >= 0 and finite, got " + std::to_string(v));
+    };
     if (lateralUm != 0) positive(lateralUm, "lateral spacing (um)");
     positive(axialUm, "axial spacing (um)");
     positive(halfDepthUm, "half depth (um)");
-    if (!(marginUm >= 0) || !std::isfinite(marginUm)) throw ConfigError("excitation field margin (um) must be >= 0 and finite, got " + std::to_string(marginUm));
-    if (!(reachUm >= 0) || !std::isfinite(reachUm)) throw ConfigError("excitation field reach (um) must be >= 0 and finite, got " + std::to_string(reachUm));
+    nonNegative(marginUm, "margin (um)");
+    nonNegative(reachUm, "reach (um)");
     positive(coarseAxialUm, "coarse axial spacing (um)");
     positive(coarseLateralUm, "coarse lateral spacing (um)");
     if (photons == 1 || photons > (uint64_t(1) << 40)) throw ConfigError("excitation field photons must be 0 or lie in [2, 2^40], got " + std::to_string(photons));

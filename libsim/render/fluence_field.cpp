@@ -147,6 +147,20 @@ private:
 
 }  // namespace
 
+namespace {
+
+// Narrows [t0, t1] to where the segment's coordinate, ua + t (ub − ua), lies in [lo, hi]; false when nothing is left.
+bool clipToSlab(double ua, double ub, double lo, double hi, double& t0, double& t1) {
+    if (std::abs(ub - ua) < 1e-300) return ua >= lo && ua <= hi && t1 > t0;
+    double ta = (lo - ua) / (ub - ua), tb = (hi - ua) / (ub - ua);
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+    return t1 > t0;
+}
+
+}  // namespace
+
 bool FieldBox::contains(const Vec3& p) const {
     const Vec3 d = p - centre;
     return std::abs(dot(d, right)) <= halfX && std::abs(dot(d, up)) <= halfY && std::abs(dot(d, axis)) <= halfZ;
@@ -213,18 +227,8 @@ void FluenceGrid::deposit(const Vec3& a, const Vec3& b, double weight) {
     }
     // Clip to the tallied range [0, n - 1] on every axis.
     double t0 = 0, t1 = 1;
-    for (size_t k = 0; k < 3; ++k) {
-        const double hi = n_[k] - 1;
-        if (std::abs(du[k]) < 1e-300) {
-            if (u0[k] < 0 || u0[k] > hi) return;
-            continue;
-        }
-        double ta = (0 - u0[k]) / du[k], tb = (hi - u0[k]) / du[k];
-        if (ta > tb) std::swap(ta, tb);
-        t0 = std::max(t0, ta);
-        t1 = std::min(t1, tb);
-    }
-    if (!(t1 > t0)) return;
+    for (size_t k = 0; k < 3; ++k)
+        if (!clipToSlab(u0[k], u0[k] + du[k], 0, n_[k] - 1, t0, t1)) return;
     // Walk the node planes crossed in order (the next crossing on each axis), so that each piece lies in one cell.
     std::array<double, 3> plane{}, next{};
     for (size_t k = 0; k < 3; ++k) {
@@ -385,19 +389,10 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
     const std::array<double, 3> skip{box.halfZ - 2 * reach.hz, box.halfX - 2 * reach.hx, box.halfY - 2 * reach.hy};
     auto depositFar = [&](FluenceGrid& far, const Vec3& a, const Vec3& b, double w) {
         double t0 = 0, t1 = 1;  // the piece inside the skipped box
-        for (size_t k = 0; k < 3 && t0 < t1; ++k) {
-            const double ua = dot(a - box.centre, frame[k]), ub = dot(b - box.centre, frame[k]);
-            if (!(skip[k] > 0)) t1 = -1;
-            else if (std::abs(ub - ua) < 1e-300) {
-                if (!(std::abs(ua) < skip[k])) t1 = -1;
-            } else {
-                double ta = (-skip[k] - ua) / (ub - ua), tb = (skip[k] - ua) / (ub - ua);
-                if (ta > tb) std::swap(ta, tb);
-                t0 = std::max(t0, ta);
-                t1 = std::min(t1, tb);
-            }
-        }
-        if (!(t1 > t0)) {
+        bool inside = true;
+        for (size_t k = 0; k < 3 && inside; ++k)
+            inside = skip[k] > 0 && clipToSlab(dot(a - box.centre, frame[k]), dot(b - box.centre, frame[k]), -skip[k], skip[k], t0, t1);
+        if (!inside) {
             far.deposit(a, b, w);
             return;
         }

@@ -18,6 +18,7 @@
 #include "optics/light_sheet.h"
 #include "optics/scattered_emission.h"
 #include "support/fluorescent_scenes.h"
+#include "support/test_scenes.h"
 #include "volume/volume_fields.h"
 
 namespace fluorosim {
@@ -218,15 +219,10 @@ TEST(SplitEstimator, MatchesThePathEstimatorWithDyeBeyondTheComputedRegion) {
             EXPECT_LT(100 * split.largestSample, without.largestSample);
         }
     }
-    auto meanAndError = [](const std::vector<double>& v) {
-        double m = 0, s2 = 0;
-        for (double x : v) m += x / double(v.size());
-        for (double x : v) s2 += (x - m) * (x - m);
-        return std::pair{m, std::sqrt(s2 / (double(v.size()) * double(v.size() - 1)))};
-    };
     for (size_t c = 0; c < crops.size(); ++c) {
-        const auto [a, sa] = meanAndError(sums[0][c]);
-        const auto [b, sb] = meanAndError(sums[1][c]);
+        const testing::Estimate path = testing::meanOf(kSeeds, [&](int s) { return sums[0][c][static_cast<size_t>(s)]; });
+        const testing::Estimate split = testing::meanOf(kSeeds, [&](int s) { return sums[1][c][static_cast<size_t>(s)]; });
+        const double a = path.mean, sa = path.stderr_, b = split.mean, sb = split.stderr_;
         const double sigma = std::hypot(sa, sb), z = (b - a) / sigma;
         std::printf("    crop (%2d, %2d) %2d px: path %.5g +- %.2g, split %.5g +- %.2g e- (%d seeds each), z = %+.2f\n", std::get<0>(crops[c]),
                     std::get<1>(crops[c]), std::get<2>(crops[c]), a, sa, b, sb, kSeeds, z);
