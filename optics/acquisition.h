@@ -52,12 +52,13 @@ struct ExcitationFieldOptions {
     double halfDepthUm = 20;    // how far from the focal plane it reaches (at least the computed region)
     // How far beyond the computed region it reaches along the focal plane. There the traced photons carry the
     // emission the sheets excite, which reaches the image only by scattering: the camera paths would find it
-    // by chance, with the sheet's irradiance as weight (docs/model.md, "The excitation field").
-    double marginUm = 100;
+    // by chance, with the sheet's irradiance as weight (docs/model.md, "The excitation field"). Unset: chosen
+    // from the tissue (fieldReachMm), as is reachUm.
+    std::optional<double> marginUm;
     // Beyond halfDepthUm it reaches out to reachUm from the focal plane, and beyond the region out to the
     // margin, on far nodes: the light that excites the dye the objective sees out of focus or only after
     // scattering, which the camera paths would otherwise find by sub-paths that reach the sheet by chance.
-    double reachUm = 120;
+    std::optional<double> reachUm;
     double coarseAxialUm = 4, coarseLateralUm = 16;  // the far nodes' spacing (laterally at least lateralUm's)
     void validate() const;      // ConfigError naming the option and value
 };

@@ -14,6 +14,7 @@
 #include "optics/index_key.h"
 #include "render/photon_tracer.h"
 #include "render/straight_line.h"
+#include "render/weight_window.h"
 #include "spectral/wavelength_sampler.h"
 #include "volume/volume_fields.h"
 
@@ -25,13 +26,17 @@ namespace {
 constexpr int kSlots = 16;
 // Share of the wavelength proposal spread uniformly, so that its density is positive wherever a dye emits.
 constexpr double kUniformShare = 0.05;
-// Russian roulette on photons that scatter where no light they send the objective can reach the image: they
-// may still come back, so they go on, less often.
-constexpr double kInvisibleSurvival = 0.5;
-constexpr uint64_t kPhotonsPerPoint = 4;
-// Beyond this distance from the focal plane a vertex's light is a disc wider than 2 × this × tan θ, smooth
-// over many pixels: photons that scatter there go on with probability max(kInvisibleSurvival, kFarDepth / |dz|).
+// A weight window on the photons, by the importance of where they scatter: 1 where their light reaches the
+// image near focus; kFarDepth / |dz| beyond kFarDepth from the focal plane, where a vertex's light is a disc
+// wider than 2 × kFarDepth × tan θ, smooth over many pixels; and where no light they send the objective can
+// reach the image, kInvisible / (1 + d / kFarDepth) at d beyond the part that can (they may come back, the
+// more seldom the farther). A photon whose power is over 2× or under ½× its unit power over the importance
+// (its power at its source times the importance there) goes on as that many copies at it (Russian roulette
+// below, splitting above): a photon that roams where it is unseen comes back as copies of bounded power, not
+// as one whose power doubled at every unseen vertex.
+constexpr double kInvisible = 0.5;
 constexpr double kFarDepthMm = 0.02;
+constexpr uint64_t kPhotonsPerPoint = 4;
 
 // The photons' wavelengths: in proportion to the scene's dyes' emission times the detection, on 1 nm cells,
 // each at its largest value over 9 points across it (a filter's edge inside a cell must not leave the density
@@ -309,22 +314,27 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
 
         // Whether light leaving v toward the objective can land on the image: within the defocus disc's
         // radius and the PSF displacement's cut of the field.
-        bool visible(const Imaging::Local& l) const {
+        bool visible(const Imaging::Local& l) const { return !(beyondVisible(l) > 0); }
+        // How far beyond that part v lies, across the axis (0 inside it).
+        double beyondVisible(const Imaging::Local& l) const {
             const double reach = std::abs(l.dz) * imaging.tanThetaMax() + margin;
             const double ox = std::max(0.0, std::abs(l.x) - 0.5 * width * imaging.pixelMm());
             const double oy = std::max(0.0, std::abs(l.y) - 0.5 * height * imaging.pixelMm());
-            return ox * ox + oy * oy <= reach * reach;
+            return std::max(0.0, std::hypot(ox, oy) - reach);
         }
         double margin = 0;
         // Mitsuba 3's rule for lossless specular chains: after a few, each goes on with probability 0.95.
         int specularEvents = 0;
         double specularSurvival(const Photon&) override { return ++specularEvents > 8 ? 0.95 : 1.0; }
-        double survival(const Photon&, const Vec3& p) override {
-            const Imaging::Local l = imaging.local(p);
-            if (!visible(l)) return kInvisibleSurvival;
+        // The walking photon's power at importance 1: at its source it lies inside its window.
+        double unitPower = 0;
+        double importance(const Imaging::Local& l) const {
             const double dz = std::abs(l.dz);
-            return dz > kFarDepthMm ? std::max(kInvisibleSurvival, kFarDepthMm / dz) : 1.0;
+            const double depth = dz > kFarDepthMm ? kFarDepthMm / dz : 1.0;
+            const double beyond = beyondVisible(l);
+            return beyond > 0 ? depth * kInvisible / (1 + beyond / kFarDepthMm) : depth;
         }
+        double survival(const Photon& ph, const Vec3& p) override { return weightWindowSurvival(ph.weight, importance(imaging.local(p)), unitPower); }
 
         void image(const Photon& ph, const Vec3& v, const HenyeyGreenstein* phase) {
             if (!(ph.weight > 0) || ph.medium == kNone) return;
@@ -509,6 +519,7 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
                 ph.lambda = lambda;
                 ph.weight = 4 * kPi * source * 1e-6 / (pdf * pdfLambda * static_cast<double>(ofKind));
                 projector.specularEvents = 0;
+                projector.unitPower = ph.weight * projector.importance(imaging.local(p));
                 // The field-lit emission's straight light is the photons' too (the computed image holds the rest).
                 if (straight > 0) {
                     Photon direct = ph;

@@ -664,7 +664,7 @@ PYBIND11_MODULE(fluorosim, mod) {
             "field_photons: the excitation field's photons per beam line and plane, 0 for none; emission_photons: the photons per "
             "plane and channel that trace the computed emission's scattered light forward, default 4 per pixel, 0 to leave it to "
             "camera paths; field_margin_um and field_reach_um: how far the field reaches beyond the computed region and from the "
-            "focal plane, where the traced photons carry the dye's light, default 100 and 120). "
+            "focal plane, where the traced photons carry the dye's light, default 100 and 120 um, more in strongly scattering tissue). "
             "progress: a callable given the fraction done (0..1), about every 0.1 s. Ctrl-C stops the run and raises "
             "KeyboardInterrupt.");
     mod.def("ground_truth", &groundTruthOf, py::arg("scene"), py::kw_only(), py::arg("planes") = py::none(), py::arg("step") = py::none(),

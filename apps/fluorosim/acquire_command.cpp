@@ -53,7 +53,7 @@ std::string fingerprint(const AcquireArgs& a, const optics::Microscope& m, const
                               {"channels", channels}, {"estimator", optics::estimatorName(o.estimator)},
                               {"noise_ratio", o.noiseRatio.value_or(0.0)},
                               {"max_spp", o.noiseRatio ? o.maxSpp : 0}, {"exposure_s", m.detector.exposureS},
-                              {"field_photons", o.field.photons}, {"field_margin_um", o.field.marginUm}, {"field_reach_um", o.field.reachUm},
+                              {"field_photons", o.field.photons}, {"field_margin_um", o.field.marginUm.value_or(-1)}, {"field_reach_um", o.field.reachUm.value_or(-1)},
                               {"emission_photons", o.emission.photons ? static_cast<int64_t>(*o.emission.photons) : int64_t(-1)},
                               {"emission_photons_per_pixel", o.emission.photonsPerPixel}};
     return j.dump();
@@ -182,10 +182,11 @@ void addAcquireCommand(CLI::App& app) {
                     "instead of sampling it with paths (default 200000; 0: paths only)");
     cmd->add_option("--field-margin-um", a->fieldMarginUm,
                     "Split estimator: how far (um) the excitation field reaches along the focal plane beyond the computed region; there the "
-                    "traced photons carry the sheet-lit dye's emission, which reaches the image only by scattering (default 100)");
+                    "traced photons carry the sheet-lit dye's emission, which reaches the image only by scattering (default 100, or 0.15 mm^2 "
+                    "times the tissue's reduced scattering coefficient where that is more)");
     cmd->add_option("--field-reach-um", a->fieldReachUm,
                     "Split estimator: how far (um) from the focal plane the excitation field reaches, on 4 um nodes beyond its fine 20 um; "
-                    "the dye lit there by scattered light is the traced photons' (default 120)");
+                    "the dye lit there by scattered light is the traced photons' (default 120, or as the margin where that is more)");
     cmd->add_option("--emission-photons", a->emissionPhotons,
                     "Split estimator: photons per plane and channel that trace the computed emission's scattered light forward and image "
                     "their vertices, where the tissue scatters the detected light (default 4 per pixel: 262144 on a 256 x 256 plane; 0: camera paths "

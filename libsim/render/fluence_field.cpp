@@ -1,9 +1,10 @@
 #include "render/fluence_field.h"
 
 #include <algorithm>
-#include <limits>
 #include <chrono>
 #include <cmath>
+#include <limits>
+#include <vector>
 
 #include "core/errors.h"
 #include "core/math.h"
@@ -13,6 +14,7 @@
 #include "materials/fresnel.h"
 #include "media/free_flight.h"
 #include "render/beam_core.h"
+#include "render/weight_window.h"
 #include "render/straight_line.h"
 #include "scene/light_sampler.h"
 
@@ -22,14 +24,25 @@ namespace {
 // The photons are split over this many slots, each traced in order into its own grid, so the sum does not
 // depend on the thread count; even and odd slots make the two halves.
 constexpr int kSlots = 8;
-// Photons farther than this from the box and heading away go on with probability kRouletteSurvival, in scenes
-// whose every medium's extinction at the line is at most kRouletteOpticalMargin / kRouletteMarginMm: where a
-// photon seldom scatters before it is far from the box. In uncleared cortex (σs 20 /mm) photons that turned
-// away come back often, and their fivefold weights made the field spiky: the paths that look it up doubled
-// their variance (0.148 -> 0.252 of the camera's over the brightest tenth).
+// How photons that wander from the field are handled depends on how far they fly between scatterings, by the
+// largest extinction σt of the scene's media at the line:
+// - σt <= kRouletteOpticalMargin / kRouletteMarginMm (4 /mm): a photon farther than kRouletteMarginMm from the
+//   field's reach and heading away goes on with probability kRouletteSurvival. It seldom scatters before it
+//   is far from the field, and seldom comes back.
+// - σt >= kWindowOpticalMargin / kRouletteMarginMm (10 /mm, free flights under 100 µm): a weight window
+//   (render/weight_window.h), by importance 1 out to kRouletteMarginMm beyond the reach and
+//   1 / (1 + d / kRouletteMarginMm) at d beyond that. Photons that wander off (hundreds of scatterings before
+//   they leave uncleared cortex) mostly die, and those that come back split into copies of their first power.
+//   The roulette's fivefold weights there made the field spiky (the paths that looked it up doubled their
+//   variance, 0.148 -> 0.252 of the camera's).
+// - Between them, analog. Where flights are long the window's survivors of a far-upstream source cross the
+//   field with their raised power before they can split: at σs 2 /mm it did worse than the roulette (two seed
+//   pairs, 0.53 / 0.45 and 1.34 / 0.46 against 0.33 / 0.39 and 0.46 / 0.30), at σs 5 /mm eight fields' spread
+//   grew from 1.5-2.5 % to 1.6-3.2 % of the field at the sheet against analog transport.
 constexpr double kRouletteMarginMm = 0.05;
 constexpr double kRouletteSurvival = 0.2;
 constexpr double kRouletteOpticalMargin = 0.2;
+constexpr double kWindowOpticalMargin = 0.5;
 
 std::string number(double v) {
     char b[32];
@@ -368,7 +381,6 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
     const double lambda = line.lambdaNm;
     const SampledWavelengths wl = SampledWavelengths::atLine(lambda, 1.0);
     const AxisSource axis(scene, profile, line.side, lambda);
-    const bool rouletteAllowed = largestExtinctionAt(scene, lambda) * kRouletteMarginMm <= kRouletteOpticalMargin;
     const FluenceGrid empty(box);
     const FieldBox reach = box.far();
     const std::optional<FluenceGrid> emptyFar = box.hasFar() ? std::optional<FluenceGrid>(FluenceGrid(reach)) : std::nullopt;
@@ -399,6 +411,27 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
         if (t0 > 0) far.deposit(a, a + (b - a) * t0, w);
         if (t1 < 1) far.deposit(a + (b - a) * t1, b, w);
     };
+    const double opticalMargin = largestExtinctionAt(scene, lambda) * kRouletteMarginMm;
+    const bool roulette = opticalMargin <= kRouletteOpticalMargin, window = opticalMargin >= kWindowOpticalMargin;
+    // How far p lies outside the reach.
+    auto outsideReach = [&](const Vec3& p) {
+        const Vec3 r = p - reach.centre;
+        const double ox = std::max(0.0, std::abs(dot(r, reach.right)) - reach.halfX), oy = std::max(0.0, std::abs(dot(r, reach.up)) - reach.halfY),
+                     oz = std::max(0.0, std::abs(dot(r, reach.axis)) - reach.halfZ);
+        return std::sqrt(ox * ox + oy * oy + oz * oz);
+    };
+    auto importance = [&](const Vec3& p) {
+        const double beyond = outsideReach(p) - kRouletteMarginMm;
+        return beyond > 0 ? 1 / (1 + beyond / kRouletteMarginMm) : 1.0;
+    };
+    // The roulette: a photon beyond kRouletteMarginMm of the reach, heading away from it, goes on with
+    // probability kRouletteSurvival (false: it ends).
+    auto rouletteAway = [&](const Vec3& p, const Vec3& dir, double& weight, Rng& rng) {
+        if (outsideReach(p) <= kRouletteMarginMm || dot(dir, p - reach.centre) < 0) return true;
+        if (rng.uniform() >= kRouletteSurvival) return false;
+        weight /= kRouletteSurvival;
+        return true;
+    };
     auto tracePhoton = [&](uint64_t index, FluenceGrid& grid, std::optional<FluenceGrid>& farGrid, SlotStats& st) {
         Rng rng = Rng::forKey(options.seed, index, seedKey);
         Vec3 onAxis;
@@ -408,102 +441,124 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
         const auto cross = profile.sampleCrossSection(onAxis, line.side, lambda, u1, u2);
         if (!cross || !(cross->pdf > 0)) return;
         const Vec3 y = cross->p;
-        int medium = mediumAt(scene, y, -d);
-        if (medium == kNone) return;
-        const Medium* med = &scene.media[static_cast<size_t>(medium)];
-        if (med->isVacuumLike()) return;
+        const int sourceMedium = mediumAt(scene, y, -d);
+        if (sourceMedium == kNone) return;
+        const Medium& source = scene.media[static_cast<size_t>(sourceMedium)];
+        if (source.isVacuumLike()) return;
         ChannelValues ch{};
-        med->channelValues(y, ch.data());
-        const double sigmaS = med->scatteringAt(lambda) * ch[kScatteringChannel];
+        source.channelValues(y, ch.data());
+        const double sigmaS = source.scatteringAt(lambda) * ch[kScatteringChannel];
         if (!(sigmaS > 0)) return;
         const double E = profile.irradiance(y, line.side, lambda);
         if (!(E > 0)) return;
-        const double T = beamTransmittanceAt(scene, y, medium, d, lambda, rng);
+        const double T = beamTransmittanceAt(scene, y, sourceMedium, d, lambda, rng);
         if (!(T > 0)) return;
-        double weight = sigmaS * E * T * kMm2PerM2 * line.weight / (pdfAxis * cross->pdf);
-        if (!(weight > 0) || !std::isfinite(weight)) return;
+        const double sourcePower = sigmaS * E * T * kMm2PerM2 * line.weight / (pdfAxis * cross->pdf);
+        if (!(sourcePower > 0) || !std::isfinite(sourcePower)) return;
         ++st.sourced;
-        st.source += weight;
-        double pdf = 0;
-        Ray ray{y, med->phase().sample(d, rng.uniform(), rng.uniform(), &pdf)};
-        // Russian roulette on photons heading away from the reach beyond kRouletteMarginMm of it (where allowed):
-        // they seldom come back, and their walk out of the tissue is a fifth of the field's time (README planes).
-        auto roulette = [&](const Vec3& p, const Vec3& dir) {
-            const Vec3 r = p - reach.centre;
-            const double ox = std::max(0.0, std::abs(dot(r, reach.right)) - reach.halfX), oy = std::max(0.0, std::abs(dot(r, reach.up)) - reach.halfY),
-                         oz = std::max(0.0, std::abs(dot(r, reach.axis)) - reach.halfZ);
-            if (!rouletteAllowed || ox * ox + oy * oy + oz * oz <= kRouletteMarginMm * kRouletteMarginMm || dot(dir, r) < 0) return true;
-            if (rng.uniform() >= kRouletteSurvival) return false;
-            weight /= kRouletteSurvival;
-            return true;
+        st.source += sourcePower;
+        // The photon, and the copies the window splits it into, each walked in turn.
+        struct Walker {
+            Ray ray;
+            int medium;
+            double weight, tMin;
         };
-        if (!roulette(y, ray.d)) return;
-        double tMin = 0;
-        for (int events = 0;; ++events) {
-            if (events >= options.maxEvents) {
-                ++st.truncated;
-                return;
-            }
-            const auto hit = scene.geometry.intersect(ray, tMin, std::numeric_limits<double>::infinity());
-            tMin = 0;
-            double end = hit ? hit->t : length(ray.o - box.centre) + 2 * boxReach;
-            bool collided = false;
-            if (!med->isVacuumLike()) {
-                // Analog delta tracking at the line.
-                const MediumSpectra spec = med->spectra(wl);
-                auto majorants = med->majorants(ray, 0.0, hit ? hit->t : std::numeric_limits<double>::infinity(), [&](const double* mx) {
-                    const MediumSample c = spec.at(mx);
-                    return c.sigmaA + c.sigmaS;
-                });
-                double s = std::numeric_limits<double>::infinity();
-                sampleTmaj<SampledSpectrum>(majorants, rng, [&](double t, const SampledSpectrum& sigmaMaj, const SampledSpectrum&) {
-                    med->channelValues(ray.at(t), ch.data());
-                    const MediumSample c = spec.at(ch.data());
-                    if (rng.uniform() * sigmaMaj[0] >= c.sigmaA[0] + c.sigmaS[0]) return true;
-                    s = t;
-                    return false;
-                });
-                if (std::isfinite(s)) {
-                    end = s;
-                    collided = true;
+        double pdf = 0;
+        std::vector<Walker> pending{{Ray{y, source.phase().sample(d, rng.uniform(), rng.uniform(), &pdf)}, sourceMedium, sourcePower, 0.0}};
+        if (roulette && !rouletteAway(y, pending.front().ray.d, pending.front().weight, rng)) return;
+        // The window's unit is the photon's power at its source, wherever that is: photons that leave the beam
+        // far from the field mostly die at their first scattering, and those that reach the field split into
+        // copies within 2× of it.
+        const double unitPower = sourcePower;
+        int copiesLeft = kMostCopiesOfAPhoton;
+        auto walk = [&](Walker w) {
+            Ray& ray = w.ray;
+            double& weight = w.weight;
+            double& tMin = w.tMin;
+            int medium = w.medium;
+            const Medium* med = &scene.media[static_cast<size_t>(medium)];
+            for (int events = 0;; ++events) {
+                if (events >= options.maxEvents) {
+                    ++st.truncated;
+                    return;
                 }
-            }
-            grid.deposit(ray.o, ray.at(end), weight);
-            if (farGrid) depositFar(*farGrid, ray.o, ray.at(end), weight);
-            if (collided) {
-                const Vec3 p = ray.at(end);
-                const MediumSample c = med->spectra(wl).at(ch.data());
-                if (!(rng.uniform() * (c.sigmaA[0] + c.sigmaS[0]) < c.sigmaS[0])) return;  // absorbed
-                ray = Ray{p, med->phase().sample(ray.d, rng.uniform(), rng.uniform(), &pdf)};
-                if (!roulette(p, ray.d)) return;
-                continue;
-            }
-            if (!hit) return;  // left the scene
-            const ShapeInfo& shape = scene.shapes[hit->shape];
-            if (!shape.isInterface) return;  // opaque surfaces absorb
-            const bool entering = dot(ray.d, hit->n) < 0;
-            const int next = entering ? shape.insideMedium : shape.outsideMedium;
-            Vec3 dir = ray.d;
-            if (shape.material != kNone) {
-                const Material& mat = *scene.materials[static_cast<size_t>(shape.material)];
-                if (!(mat.isSpecular() && mat.isTransmissive())) return;  // only smooth dielectrics are modelled
-                const double n1 = scene.ior(medium), n2 = scene.ior(next);
-                const Vec3 nFacing = entering ? hit->n : -hit->n;
-                const double cosI = -dot(ray.d, nFacing);
-                Vec3 wt;
-                if (rng.uniform() < fresnelDielectric(cosI, n2 / n1) || !refract(-ray.d, nFacing, n2 / n1, &wt)) {
-                    dir = normalize(ray.d + nFacing * (2 * cosI));
-                    ray = Ray{hit->p, dir};
-                    tMin = hit->epsilon / std::max(std::abs(dot(hit->n, dir)), 1e-2);
+                const auto hit = scene.geometry.intersect(ray, tMin, std::numeric_limits<double>::infinity());
+                tMin = 0;
+                double end = hit ? hit->t : length(ray.o - box.centre) + 2 * boxReach;
+                bool collided = false;
+                if (!med->isVacuumLike()) {
+                    // Analog delta tracking at the line.
+                    const MediumSpectra spec = med->spectra(wl);
+                    auto majorants = med->majorants(ray, 0.0, hit ? hit->t : std::numeric_limits<double>::infinity(), [&](const double* mx) {
+                        const MediumSample c = spec.at(mx);
+                        return c.sigmaA + c.sigmaS;
+                    });
+                    double s = std::numeric_limits<double>::infinity();
+                    sampleTmaj<SampledSpectrum>(majorants, rng, [&](double t, const SampledSpectrum& sigmaMaj, const SampledSpectrum&) {
+                        med->channelValues(ray.at(t), ch.data());
+                        const MediumSample c = spec.at(ch.data());
+                        if (rng.uniform() * sigmaMaj[0] >= c.sigmaA[0] + c.sigmaS[0]) return true;
+                        s = t;
+                        return false;
+                    });
+                    if (std::isfinite(s)) {
+                        end = s;
+                        collided = true;
+                    }
+                }
+                grid.deposit(ray.o, ray.at(end), weight);
+                if (farGrid) depositFar(*farGrid, ray.o, ray.at(end), weight);
+                if (collided) {
+                    const Vec3 p = ray.at(end);
+                    const MediumSample c = med->spectra(wl).at(ch.data());
+                    if (!(rng.uniform() * (c.sigmaA[0] + c.sigmaS[0]) < c.sigmaS[0])) return;  // absorbed
+                    const Vec3 arrived = ray.d;
+                    auto direction = [&] { return med->phase().sample(arrived, rng.uniform(), rng.uniform(), &pdf); };
+                    if (!window) {
+                        ray = Ray{p, direction()};
+                        if (roulette && !rouletteAway(p, ray.d, weight, rng)) return;
+                        continue;
+                    }
+                    double q = weightWindowSurvival(weight, importance(p), unitPower);
+                    const int copies = copiesGoingOn(q, copiesLeft, rng);
+                    if (copies == 0) return;
+                    weight /= q;
+                    for (int k = 1; k < copies; ++k) pending.push_back({Ray{p, direction()}, medium, weight, 0.0});
+                    ray = Ray{p, direction()};
                     continue;
                 }
-                dir = wt;
+                if (!hit) return;  // left the scene
+                const ShapeInfo& shape = scene.shapes[hit->shape];
+                if (!shape.isInterface) return;  // opaque surfaces absorb
+                const bool entering = dot(ray.d, hit->n) < 0;
+                const int next = entering ? shape.insideMedium : shape.outsideMedium;
+                Vec3 dir = ray.d;
+                if (shape.material != kNone) {
+                    const Material& mat = *scene.materials[static_cast<size_t>(shape.material)];
+                    if (!(mat.isSpecular() && mat.isTransmissive())) return;  // only smooth dielectrics are modelled
+                    const double n1 = scene.ior(medium), n2 = scene.ior(next);
+                    const Vec3 nFacing = entering ? hit->n : -hit->n;
+                    const double cosI = -dot(ray.d, nFacing);
+                    Vec3 wt;
+                    if (rng.uniform() < fresnelDielectric(cosI, n2 / n1) || !refract(-ray.d, nFacing, n2 / n1, &wt)) {
+                        dir = normalize(ray.d + nFacing * (2 * cosI));
+                        ray = Ray{hit->p, dir};
+                        tMin = hit->epsilon / std::max(std::abs(dot(hit->n, dir)), 1e-2);
+                        continue;
+                    }
+                    dir = wt;
+                }
+                medium = next;
+                if (medium == kNone) return;
+                med = &scene.media[static_cast<size_t>(medium)];
+                ray = Ray{hit->p, dir};
+                tMin = hit->epsilon / std::max(std::abs(dot(hit->n, dir)), 1e-2);
             }
-            medium = next;
-            if (medium == kNone) return;
-            med = &scene.media[static_cast<size_t>(medium)];
-            ray = Ray{hit->p, dir};
-            tMin = hit->epsilon / std::max(std::abs(dot(hit->n, dir)), 1e-2);
+        };
+        while (!pending.empty()) {
+            const Walker next = pending.back();
+            pending.pop_back();
+            walk(next);
         }
     };
 

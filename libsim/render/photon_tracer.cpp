@@ -2,7 +2,9 @@
 
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <limits>
+#include <vector>
 
 #include "core/errors.h"
 #include "core/math.h"
@@ -10,6 +12,7 @@
 #include "core/rng.h"
 #include "core/sampling.h"
 #include "materials/fresnel.h"
+#include "render/weight_window.h"
 
 namespace fluorosim {
 namespace {
@@ -92,7 +95,44 @@ double sampleLightWavelength(const Spectrum& s, double lambdaMin, double lambdaM
     return s(*lambda) * (lambdaMax - lambdaMin) / (1.0 - pLine);
 }
 
+namespace {
+
+// After a scattering or a re-emission at p: the survival's copies (false ends the photon). The photon itself
+// goes on as the first, with its power over q; each other one is left in `pending` to walk on from p in its
+// own direction.
+bool goOn(Photon& ph, const Vec3& p, Rng& rng, PhotonEvents& events, int& copiesLeft, std::vector<Photon>& pending,
+          const std::function<Vec3()>& direction) {
+    double q = events.survival(ph, p);
+    const int copies = copiesGoingOn(q, copiesLeft, rng);
+    if (copies == 0) return false;
+    ph.weight /= q;
+    for (int c = 1; c < copies; ++c) {
+        Photon copy = ph;
+        copy.ray = Ray{p, direction()};
+        pending.push_back(copy);
+    }
+    return true;
+}
+
+void walkPhotonFrom(const Scene& scene, Photon ph, Rng& rng, PhotonEvents& events, bool scatterAtSurfaces, int& copiesLeft,
+                    std::vector<Photon>& pending);
+
+}  // namespace
+
 void walkPhoton(const Scene& scene, Photon ph, Rng& rng, PhotonEvents& events, bool scatterAtSurfaces) {
+    int copiesLeft = kMostCopiesOfAPhoton;
+    std::vector<Photon> pending{ph};
+    while (!pending.empty()) {
+        const Photon next = pending.back();
+        pending.pop_back();
+        walkPhotonFrom(scene, next, rng, events, scatterAtSurfaces, copiesLeft, pending);
+    }
+}
+
+namespace {
+
+void walkPhotonFrom(const Scene& scene, Photon ph, Rng& rng, PhotonEvents& events, bool scatterAtSurfaces, int& copiesLeft,
+                    std::vector<Photon>& pending) {
     // The medium's spectra at the photon's wavelength, looked up again only when either changes.
     const Medium* spectraOf = nullptr;
     double spectraAt = -1;
@@ -130,12 +170,13 @@ void walkPhoton(const Scene& scene, Photon ph, Rng& rng, PhotonEvents& events, b
                     ph.sigmaT = st;
                     events.scattered(ph, p);
                     ph.sigmaT = -1;
-                    if (const double q = events.survival(ph, p); q < 1) {
-                        if (!(rng.uniform() < q)) return;
-                        ph.weight /= q;
-                    }
-                    double pdf = 0;
-                    ph.ray = Ray{p, m.phase().sample(ph.ray.d, rng.uniform(), rng.uniform(), &pdf)};
+                    const Vec3 arrived = ph.ray.d;
+                    auto scatteredDirection = [&] {
+                        double pdf = 0;
+                        return m.phase().sample(arrived, rng.uniform(), rng.uniform(), &pdf);
+                    };
+                    if (!goOn(ph, p, rng, events, copiesLeft, pending, scatteredDirection)) return;
+                    ph.ray = Ray{p, scatteredDirection()};
                     continue;
                 }
                 // Absorbed: by which dye, if any?
@@ -164,10 +205,8 @@ void walkPhoton(const Scene& scene, Photon ph, Rng& rng, PhotonEvents& events, b
                 ph.ray = Ray{p, sampleUniformSphere(rng.uniform(), rng.uniform())};
                 if (ph.weight == 0) return;
                 events.reemitted(ph, p);
-                if (const double q = events.survival(ph, p); q < 1) {
-                    if (!(rng.uniform() < q)) return;
-                    ph.weight /= q;
-                }
+                if (!goOn(ph, p, rng, events, copiesLeft, pending, [&] { return sampleUniformSphere(rng.uniform(), rng.uniform()); }))
+                    return;
                 continue;
             }
             if (!hit) return;  // lost in an unbounded medium
@@ -223,6 +262,8 @@ void walkPhoton(const Scene& scene, Photon ph, Rng& rng, PhotonEvents& events, b
         ph.tMin = hit->epsilon / std::max(std::abs(dot(hit->n, dir)), 1e-2);
     }
 }
+
+}  // namespace
 
 void ForwardPhotonOptions::validate() const {
     if (photons == 0 || photons > (uint64_t(1) << 40)) throw ConfigError("photon count must lie in [1, 2^40], got " + std::to_string(photons));

@@ -66,8 +66,11 @@ public:
     virtual void reemitted(const Photon& /*ph*/, const Vec3& /*p*/) {}
     // Left the scene.
     virtual void escaped(const Photon& /*ph*/) {}
-    // After a scattering or a re-emission at p: the probability that the photon goes on (Russian roulette;
-    // a survivor's power is divided by it). Where nothing the caller tallies can follow, below 1 saves time.
+    // After a scattering or a re-emission at p: how many copies of the photon go on, on average, each with
+    // its power divided by it. Below 1 it is Russian roulette (the probability that the photon goes on),
+    // which saves time where nothing the caller tallies can follow; above 1 the photon splits into ⌊q⌋ or
+    // ⌈q⌉ copies (at most 64 at a vertex and 4096 from one photon), which bounds the power a photon brings
+    // back to where the caller tallies (a weight window).
     virtual double survival(const Photon& /*ph*/, const Vec3& /*p*/) { return 1.0; }
     // The same after a reflection or refraction at a smooth dielectric: light guided without loss by total
     // internal reflection (a clear block) would otherwise never end.
