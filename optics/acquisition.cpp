@@ -253,6 +253,8 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                 r.fieldPhotons += f.stats.photons;
                 r.fieldSeconds += f.stats.seconds;
                 r.fieldLateralSpacingUm = f.mean.box().hx * 1e3;
+                r.fieldMarginUm = (f.reach().halfX - f.mean.box().halfX) * 1e3;
+                r.fieldReachUm = f.reach().halfZ * 1e3;
             }
         computed = u.electrons;
         emissionPoints = u.emission;

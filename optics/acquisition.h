@@ -119,6 +119,7 @@ struct PlaneImage {
     uint64_t fieldPhotons = 0;
     double fieldSeconds = 0, fieldElectrons = 0;
     double fieldLateralSpacingUm = 0;  // the node spacing along the focal plane (0: no field)
+    double fieldMarginUm = 0, fieldReachUm = 0;  // how far it reaches beyond the computed region and from focus
     std::vector<double> fieldHalfDifference;
     // The computed emission's scattered light traced forward (AcquireOptions::emission): its photons, their
     // vertices imaged, its time and its photoelectrons summed over pixels (in `electrons`, its variance in

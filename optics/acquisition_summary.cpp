@@ -64,6 +64,8 @@ std::string AcquisitionSummary::addPlane(size_t slot, int plane, const PlaneImag
     fieldSum_ += image.fieldElectrons;
     if (image.fieldLateralSpacingUm > 0)
         fieldSpacingUm_ = fieldSpacingUm_ > 0 ? std::min(fieldSpacingUm_, image.fieldLateralSpacingUm) : image.fieldLateralSpacingUm;
+    fieldMarginUm_ = std::max(fieldMarginUm_, image.fieldMarginUm);
+    fieldReachUm_ = std::max(fieldReachUm_, image.fieldReachUm);
     emissionPhotons_ += image.emissionPhotons;
     emissionVertices_ += image.emissionVertices;
     emissionSeconds_ += image.emissionSeconds;
@@ -141,6 +143,8 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
         {"excitation_field", "seconds", fieldSeconds_},
         {"excitation_field", "electrons_fraction", fieldSum_ / total},
         {"excitation_field", "lateral_spacing_um", fieldSpacingUm_, !(fieldSpacingUm_ > 0)},
+        {"excitation_field", "margin_um", fieldMarginUm_, !(fieldSpacingUm_ > 0)},
+        {"excitation_field", "reach_um", fieldReachUm_, !(fieldSpacingUm_ > 0)},
         // Its noise (correlated across pixels; from the field's two halves) over the camera's, brightest 10 %.
         {"excitation_field", "median_noise_over_camera_variance_top10", median(budget_[kFieldPart][0]), budget_[kFieldPart][0].empty()},
         // The computed emission's scattered light, traced forward from its points (split estimator).

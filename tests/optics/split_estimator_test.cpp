@@ -233,6 +233,27 @@ TEST(SplitEstimator, MatchesThePathEstimatorWithDyeBeyondTheComputedRegion) {
 
 // The camera paths carrying the scattered emission (connections to the computed emission): the estimator
 // before the traced one, kept as an option.
+// The field's margin and reach: 100 and 120 um, or 0.15 mm² × the reduced scattering coefficient σs (1 - g)
+// where that is more (300 um at σs 20 /mm, g 0.9: uncleared cortex), unless set.
+TEST(SplitEstimator, TheFieldReachesFartherInStronglyScatteringTissue) {
+    const auto reach = [](double sigmaS, std::optional<optics::ExcitationFieldOptions> field = std::nullopt) {
+        const optics::PlaneImage r = render(filamentScene(sigmaS), optics::Estimator::Split, 1, 3, std::nullopt, 2000, 4096, field);
+        return std::pair{r.fieldMarginUm, r.fieldReachUm};
+    };
+    const auto [thinMargin, thinReach] = reach(2.0);
+    EXPECT_NEAR(thinMargin, 100, 1e-6);
+    EXPECT_NEAR(thinReach, 120, 1e-6);
+    const auto [denseMargin, denseReach] = reach(20.0);
+    EXPECT_NEAR(denseMargin, 300, 1e-6);
+    EXPECT_NEAR(denseReach, 300, 1e-6);
+    optics::ExcitationFieldOptions set;
+    set.marginUm = 50;
+    set.reachUm = 60;
+    const auto [setMargin, setReach] = reach(20.0, set);
+    EXPECT_NEAR(setMargin, 50, 1e-6);
+    EXPECT_NEAR(setReach, 60, 1e-6);
+}
+
 TEST(SplitEstimator, MatchesThePathEstimatorInScatteringTissueWithPathsForTheScatteredEmission) {
     expectSameImage(2.0, 1024, 1024, optics::ExcitationFieldOptions{}.photons, 0);
 }
