@@ -113,6 +113,8 @@ private:
     const ScatteredEmissionImage* traced_;
 };
 
+// Adaptive sampling traces at most this many times the first count of field photons.
+constexpr double kMostFieldFactor = 16;
 // Pilot paths of adaptive sampling draw from sample indices the estimate never reaches.
 constexpr uint64_t kPilotSample = uint64_t(1) << 40;
 // The further traces of adaptive sampling (field and photons) draw from streams keyed apart from the first's.
@@ -203,51 +205,15 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
     std::vector<double> computed(r.electrons.size(), 0.0);
     std::shared_ptr<const EmissionPoints> emissionPoints;
     std::unique_ptr<const BeamExcitationField> field;
-    if (model) {
-        field = traceExcitationField(scene, tracer, imaging, *model, o, streamKey);
-        auto fieldComplete = [&] {
-            return !field || std::all_of(field->fields().begin(), field->fields().end(), [](const BeamFluence& f) { return f.stats.complete; });
-        };
-        if (!fieldComplete()) {
-            r.complete = false;
-            return r;
-        }
-        UnscatteredPlane u = computeUnscatteredImage(scene, tracer.lights(), imaging, *model, o.threads, o.cancel, field.get());
-        if (!u.complete) {
-            r.complete = false;
-            return r;
-        }
-        // Adaptive sampling: more field photons, in one further trace from other streams pooled with the first,
-        // until the field's median variance in the computed image over the brightest 1 % (where the neurites
-        // are, and where its noise is; at least 64 pixels) is at most half the target's, at most
-        // kMostFieldFactor times the first count; the computed image is then made again with the pooled field.
-        if (o.noiseRatio && field && !u.fieldHalfDifference.empty()) {
-            constexpr double kMostFieldFactor = 16;
-            std::vector<double> variance(u.fieldHalfDifference.size());
-            for (size_t i = 0; i < variance.size(); ++i) variance[i] = sqr(u.fieldHalfDifference[i]);
-            const double brightest = std::min(0.99, 1.0 - 64.0 / double(variance.size()));
-            AcquireOptions more = o;
-            more.field.photons = adaptiveExtraPhotons(medianVarianceOverCamera(variance, u.electrons, brightest, darkElectrons, detector.readNoiseElectrons),
-                                                      *o.noiseRatio, kMostFieldFactor, o.field.photons);
-            if (more.field.photons > 0) {
-                std::unique_ptr<const BeamExcitationField> extra =
-                    traceExcitationField(scene, tracer, imaging, *model, more, mixBits(streamKey + kAdaptiveStreams));
-                if (extra) {
-                    std::vector<BeamFluence> pooled;
-                    for (size_t i = 0; i < field->fields().size(); ++i) pooled.push_back(pooledFluence(field->fields()[i], extra->fields()[i]));
-                    field = std::make_unique<const BeamExcitationField>(std::move(pooled));
-                    if (!fieldComplete()) {
-                        r.complete = false;
-                        return r;
-                    }
-                    u = computeUnscatteredImage(scene, tracer.lights(), imaging, *model, o.threads, o.cancel, field.get());
-                    if (!u.complete) {
-                        r.complete = false;
-                        return r;
-                    }
-                }
-            }
-        }
+    auto fieldComplete = [&] {
+        return !field || std::all_of(field->fields().begin(), field->fields().end(), [](const BeamFluence& f) { return f.stats.complete; });
+    };
+    // The computed image with the current field, and what the plane keeps of it (false: cancelled).
+    auto makeComputed = [&] {
+        const UnscatteredPlane u = computeUnscatteredImage(scene, tracer.lights(), imaging, *model, o.threads, o.cancel, field.get());
+        if (!u.complete) return false;
+        r.fieldPhotons = 0;
+        r.fieldSeconds = 0;
         if (field)
             for (const BeamFluence& f : field->fields()) {
                 r.fieldPhotons += f.stats.photons;
@@ -260,11 +226,51 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         emissionPoints = u.emission;
         r.computedPoints = u.points;
         r.computedDroppedFraction = u.droppedFraction;
-        r.computedSeconds = u.seconds;
+        r.computedSeconds += u.seconds;
         r.computedTimings = u.timings;
         r.computedImage = u.electrons;
         r.fieldElectrons = u.fieldElectrons;
         r.fieldHalfDifference = u.fieldHalfDifference;
+        return true;
+    };
+    // Adaptive sampling of the field: `photons` more per line side, in a further trace from the streams
+    // `streams` apart, pooled with what it has, and the computed image made again (false: cancelled).
+    auto poolMoreField = [&](uint64_t photons, uint64_t streams) {
+        AcquireOptions more = o;
+        more.field.photons = photons;
+        std::unique_ptr<const BeamExcitationField> extra = traceExcitationField(scene, tracer, imaging, *model, more, mixBits(streamKey + streams));
+        if (extra) {
+            std::vector<BeamFluence> pooled;
+            for (size_t i = 0; i < field->fields().size(); ++i) pooled.push_back(pooledFluence(field->fields()[i], extra->fields()[i]));
+            field = std::make_unique<const BeamExcitationField>(std::move(pooled));
+        }
+        return fieldComplete() && makeComputed();
+    };
+    // The field's photons per line side so far, against kMostFieldFactor times the first count.
+    auto fieldPhotonsLeft = [&] { return kMostFieldFactor * double(o.field.photons) / double(field->fields().front().stats.photons); };
+    const double brightest = std::min(0.99, 1.0 - 64.0 / double(r.electrons.size()));  // the brightest 1 %, at least 64 pixels
+    if (model) {
+        field = traceExcitationField(scene, tracer, imaging, *model, o, streamKey);
+        if (!fieldComplete() || !makeComputed()) {
+            r.complete = false;
+            return r;
+        }
+        // Adaptive sampling: more field photons, in one further trace from other streams pooled with the first,
+        // until the field's median variance in the computed image over the brightest 1 % (where the neurites
+        // are, and where its noise is; at least 64 pixels) is at most half the target's, at most
+        // kMostFieldFactor times the first count; the computed image is then made again with the pooled field.
+        // Its noise in the traced photons' sources is weighed after them (below).
+        if (o.noiseRatio && field && !r.fieldHalfDifference.empty()) {
+            std::vector<double> variance(r.fieldHalfDifference.size());
+            for (size_t i = 0; i < variance.size(); ++i) variance[i] = sqr(r.fieldHalfDifference[i]);
+            const uint64_t photons =
+                adaptiveExtraPhotons(medianVarianceOverCamera(variance, computed, brightest, darkElectrons, detector.readNoiseElectrons), *o.noiseRatio,
+                                     kMostFieldFactor, o.field.photons);
+            if (photons > 0 && !poolMoreField(photons, kAdaptiveStreams)) {
+                r.complete = false;
+                return r;
+            }
+        }
     }
     const bool bends = hasRefractingSurfaces(scene);
     // The computed emission's scattered light, traced forward; the paths then leave it out.
@@ -281,12 +287,35 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
     const bool emissionTraced = model && emissionPoints && !emissionPoints->empty() && o.emission.photonsFor(static_cast<size_t>(width) * height) > 0 &&
                                 scattersEmission && tracer.fluorescence().model() == FluorescenceModel::Full && !o.labels;
     if (emissionTraced) {
-        const PathImaging covered(imaging, model, emissionPoints.get(), imaging.centre(), o.poolingFraction);
-        traced = traceScatteredEmission(scene, tracer, imaging, covered, *emissionPoints, field.get(), detection, detector.exposureS, o.emission,
-                                        o.seed, streamKey, o.threads, o.cancel);
-        if (!traced.complete) {
+        std::optional<PathImaging> covered;
+        auto traceEmission = [&] {
+            covered.emplace(imaging, model, emissionPoints.get(), imaging.centre(), o.poolingFraction);
+            traced = traceScatteredEmission(scene, tracer, imaging, *covered, *emissionPoints, field.get(), detection, detector.exposureS, o.emission,
+                                            o.seed, streamKey, o.threads, o.cancel);
+            return traced.complete;
+        };
+        if (!traceEmission()) {
             r.complete = false;
             return r;
+        }
+        // Adaptive sampling: the field's noise reaches the photons' sources too, and through them the haze
+        // (docs/performance.md, "Where the field's noise goes"). Where the field's part, in the computed image
+        // and the traced one together, misses half the target's over the brightest tenth or 1 %: more field
+        // photons (within kMostFieldFactor times the first count), the computed image made again, the photons
+        // traced again with the pooled field.
+        if (o.noiseRatio && field && traced.fieldHalfDifference.size() == computed.size()) {
+            std::vector<double> variance(computed.size()), signal(computed.size());
+            for (size_t i = 0; i < variance.size(); ++i) {
+                variance[i] = sqr((r.fieldHalfDifference.empty() ? 0.0 : r.fieldHalfDifference[i]) + traced.fieldHalfDifference[i]);
+                signal[i] = computed[i] + traced.electrons[i];
+            }
+            const double ratio = std::max(medianVarianceOverCamera(variance, signal, 0.9, darkElectrons, detector.readNoiseElectrons),
+                                          medianVarianceOverCamera(variance, signal, brightest, darkElectrons, detector.readNoiseElectrons));
+            const uint64_t photons = adaptiveExtraPhotons(ratio, *o.noiseRatio, fieldPhotonsLeft(), field->fields().front().stats.photons);
+            if (photons > 0 && (!poolMoreField(photons, kAdaptiveStreams + 1) || !traceEmission())) {
+                r.complete = false;
+                return r;
+            }
         }
         // Adaptive sampling: more photons, in one further trace from other streams, until the traced part's
         // median variance over the brightest tenth is at most half the target's (the rest is the paths' and
@@ -300,7 +329,7 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
             more.photons = adaptiveExtraPhotons(medianVarianceOverCamera(traced.variance, signal, 0.9, darkElectrons, detector.readNoiseElectrons),
                                                 *o.noiseRatio, kMostTracedFactor, traced.photons);
             if (*more.photons > 0) {
-                const ScatteredEmissionImage extra = traceScatteredEmission(scene, tracer, imaging, covered, *emissionPoints, field.get(), detection,
+                const ScatteredEmissionImage extra = traceScatteredEmission(scene, tracer, imaging, *covered, *emissionPoints, field.get(), detection,
                                                                             detector.exposureS, more, o.seed, mixBits(streamKey + kAdaptiveStreams),
                                                                             o.threads, o.cancel);
                 if (!extra.complete) {
@@ -309,6 +338,11 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                 }
                 traced = pooledTraces(traced, extra);
             }
+        }
+        // The field's noise in the image: the computed part's and the traced part's, from the same halves.
+        if (traced.fieldHalfDifference.size() == computed.size()) {
+            if (r.fieldHalfDifference.empty()) r.fieldHalfDifference.assign(computed.size(), 0.0);
+            for (size_t i = 0; i < computed.size(); ++i) r.fieldHalfDifference[i] += traced.fieldHalfDifference[i];
         }
         r.emissionPhotons = traced.photons;
         r.emissionVertices = traced.vertices;

@@ -279,7 +279,7 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
     out.variance.assign(pixels, 0.0);
     const uint64_t photons = options.photonsFor(pixels);
     if (photons == 0 || emission.empty()) return out;
-    requireMemory(8.0 * kImageLevels * kSlots * static_cast<double>(pixels), "the scattered emission's images");
+    requireMemory(8.0 * kImageLevels * kSlots * static_cast<double>(pixels) * (field ? 2 : 1), "the scattered emission's images");
     const WavelengthSampler wavelengths = emissionWavelengths(scene, detection);
     const WidefieldPsf& psf = imaging.psf();
     const Vec3 axis = imaging.axis();
@@ -288,7 +288,7 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
 
     // Per slot and image level, the sum of the deposits on each pixel (levels allocated when first used).
     struct Slot {
-        std::array<std::vector<double>, kImageLevels> level;
+        std::array<std::vector<double>, kImageLevels> level, fieldLevel;  // fieldLevel: the field's noise (fieldShare)
         uint64_t vertices = 0;
     };
     std::vector<Slot> slots(kSlots);
@@ -307,6 +307,8 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
         int directions, width, height;
         Slot* slot = nullptr;
         Rng* rng = nullptr;
+        // The share of the walking photon's power that is the field's half difference (its noise).
+        double fieldShare = 0;
         Projector(const Scene& s, const PathTracer& t, const Imaging& i, const CameraPathImaging& c, const WidefieldPsf& p,
                   const std::function<double(double)>& d, Vec3 a, double cm, double co, double e, int dirs)
             : scene(s), tracer(t), imaging(i), covered(c), psf(p), detection(d), axis(a), cosMax(cm), cone(co), exposureS(e), directions(dirs),
@@ -351,6 +353,8 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
             const SampledWavelengths wl = SampledWavelengths::atLine(ph.lambda, 1.0);
             std::vector<double>& img = slot->level[static_cast<size_t>(level)];
             if (img.empty()) img.assign(static_cast<size_t>(width) * height, 0.0);
+            std::vector<double>& noise = slot->fieldLevel[static_cast<size_t>(level)];
+            if (fieldShare != 0 && noise.empty()) noise.assign(static_cast<size_t>(width) * height, 0.0);
             // Directions of the cone from two techniques, the phase lobe (a draw outside the cone gives nothing)
             // and the cone uniformly, weighed by the balance heuristic (f/q, q = half of each density: f/q <= 2).
             // With an even count the techniques alternate and the cone's draws are stratified in azimuth, so that
@@ -399,6 +403,7 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
                 const double e = exposureS * det * ph.weight * (f / q) * T * R / n;
                 if (!std::isfinite(e)) continue;
                 img[static_cast<size_t>(row) * width + static_cast<size_t>(col)] += e;
+                if (fieldShare != 0) noise[static_cast<size_t>(row) * width + static_cast<size_t>(col)] += e * fieldShare;
             }
         }
         // Transmittance from v along w (sv from the focal-plane crossing, `reach` to the objective's front) as
@@ -456,7 +461,8 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
         // Photons leave each source point kPhotonsPerPoint at a time: the point's excitation (a beam
         // transmittance traced back to where the beam entered) is the costliest part of a photon.
         const std::vector<double>& lines = tracer.lineWavelengths();
-        std::vector<double> excitation(lines.size()), beyond(lines.size());
+        // Per line, the excitation, and the field's half difference in it (its noise).
+        std::vector<double> excitation(lines.size()), beyond(lines.size()), excitationNoise(lines.size()), beyondNoise(lines.size());
         for (uint64_t i = s, n = 0; i < latticePoints + fieldPoints; i += kSlots, ++n) {
             if (cancel && (n & 63) == 0 && cancel->load()) {
                 stopped = true;
@@ -491,7 +497,9 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
             const bool computed = covered.computesUnscatteredAt(p);
             for (size_t l = 0; l < lines.size(); ++l) {
                 excitation[l] = computed ? tracer.coreMeanRadiance(p, medium, lines[l], field, rng) : 0.0;
+                excitationNoise[l] = computed && field ? field->scatteredHalfDifference(p, lines[l], 1.0, 0.0).value_or(0.0) : 0.0;
                 beyond[l] = fromLattice ? 0.0 : field->scatteredMeanRadiance(p, lines[l], computed ? 0.0 : 1.0, 1.0).value_or(0.0);
+                beyondNoise[l] = fromLattice ? 0.0 : field->scatteredHalfDifference(p, lines[l], computed ? 0.0 : 1.0, 1.0).value_or(0.0);
                 // Beyond the computed part, inside the field's box, the beams' core emission is the photons' too.
                 if (!fromLattice && !computed && out.tracesBeamLit(p, medium)) beyond[l] += tracer.coreMeanRadiance(p, medium, lines[l], nullptr, rng);
                 lit = excitation[l] + beyond[l] > 0 || lit;
@@ -504,11 +512,14 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
                 const SampledWavelengths drawn = wavelengths.sample(0.0, rng.uniform());
                 const double lambda = drawn.lambda[0], pdfLambda = drawn.pdf[0];
                 double source = 0, straight = 0;  // the emission coefficient at λ (radiance per mm), and what the photons image straight
+                double sourceNoise = 0, straightNoise = 0;  // the field's half differences in them
                 for (size_t l = 0; l < lines.size(); ++l)
                     if (excitation[l] + beyond[l] > 0) {
                         const double kernel = tracer.fluorescence().kernel(medium, ch.data(), lines[l], lambda);
                         source += kernel * (excitation[l] + beyond[l]);
                         straight += kernel * beyond[l];
+                        sourceNoise += kernel * (excitationNoise[l] + beyondNoise[l]);
+                        straightNoise += kernel * beyondNoise[l];
                     }
                 if (!(source > 0) || !(pdfLambda > 0)) continue;
                 // Power per unit of the scene's radiance scale: 4π × the emission coefficient × the volume, with
@@ -524,8 +535,10 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
                 if (straight > 0) {
                     Photon direct = ph;
                     direct.weight *= straight / source;
+                    projector.fieldShare = straightNoise / straight;
                     projector.image(direct, p, nullptr);
                 }
+                projector.fieldShare = sourceNoise / source;
                 walkPhoton(scene, ph, rng, projector, false);
             }
         }
@@ -550,6 +563,17 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
     for (int s = 0; s < kSlots; ++s) {
         for (size_t i = 0; i < pixels; ++i) out.electrons[i] += slotImages[static_cast<size_t>(s)][i];
         out.vertices += slots[static_cast<size_t>(s)].vertices;
+    }
+    // The field's noise: every slot's levels, spread back to pixels, summed.
+    if (field) {
+        out.fieldHalfDifference.assign(pixels, 0.0);
+        for (int k = 0; k < kImageLevels; ++k)
+            for (const Slot& slot : slots) {
+                const std::vector<double>& level = slot.fieldLevel[static_cast<size_t>(k)];
+                if (level.empty()) continue;
+                const std::vector<double> spread = k == 0 ? level : poolImage(level, width, height, k);
+                for (size_t i = 0; i < pixels; ++i) out.fieldHalfDifference[i] += spread[i];
+            }
     }
     for (int s = 0; s < kSlots; ++s)
         for (size_t i = 0; i < pixels; ++i) out.variance[i] += sqr(kSlots * slotImages[static_cast<size_t>(s)][i] - out.electrons[i]);
@@ -580,6 +604,10 @@ ScatteredEmissionImage pooledTraces(const ScatteredEmissionImage& a, const Scatt
         }
     for (size_t s = 0; s < slots; ++s)
         for (size_t i = 0; i < pixels; ++i) out.variance[i] += sqr(out.slots[s][i] - out.electrons[i]) / (double(slots) * double(slots - 1));
+    if (a.fieldHalfDifference.size() == pixels && b.fieldHalfDifference.size() == pixels) {
+        out.fieldHalfDifference.assign(pixels, 0.0);
+        for (size_t i = 0; i < pixels; ++i) out.fieldHalfDifference[i] = wa * a.fieldHalfDifference[i] + wb * b.fieldHalfDifference[i];
+    }
     out.photons = a.photons + b.photons;
     out.vertices = a.vertices + b.vertices;
     out.fieldLitMedia = a.fieldLitMedia;

@@ -44,6 +44,10 @@ struct ScatteredEmissionImage {
     // region's variance follows from their sums over it (the deposits of one photon are correlated across
     // the pixels its vertices light, which the per-pixel variance does not see).
     std::vector<std::vector<double>> slots;
+    // The excitation field's noise in it, per pixel: half the difference of the images its two halves give
+    // the photons' sources (empty without a field). It is correlated with the computed image's
+    // (PlaneImage::fieldHalfDifference, the same halves), so the two add before they are squared.
+    std::vector<double> fieldHalfDifference;
     uint64_t photons = 0, vertices = 0;
     // The media whose field-lit emission the photons carry (by index; empty when none).
     std::vector<bool> fieldLitMedia;

@@ -336,6 +336,8 @@ BeamFluence pooledFluence(const BeamFluence& a, const BeamFluence& b) {
     pool(out.mean, b.mean);
     for (int k = 0; k < 2; ++k) pool(out.half[k], b.half[k]);
     if (out.far && b.far) pool(*out.far, *b.far);
+    for (int k = 0; k < 2; ++k)
+        if (out.farHalf[k] && b.farHalf[k]) pool(*out.farHalf[k], *b.farHalf[k]);
     out.stats.photons += b.stats.photons;
     out.stats.sourced += b.stats.sourced;
     out.stats.truncated += b.stats.truncated;
@@ -587,9 +589,15 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
     out.mean.add(out.half[1]);
     out.mean.scale(0.5);
     if (emptyFar) {
+        for (int h = 0; h < 2; ++h) {
+            out.farHalf[h] = emptyFar;
+            for (size_t s = static_cast<size_t>(h); s < farSlots.size(); s += 2) out.farHalf[h]->add(*farSlots[s]);
+            out.farHalf[h]->normalise(static_cast<double>((options.photons + 1 - static_cast<uint64_t>(h)) / 2));
+        }
         out.far = emptyFar;
-        for (const std::optional<FluenceGrid>& f : farSlots) out.far->add(*f);
-        out.far->normalise(static_cast<double>(options.photons));
+        out.far->add(*out.farHalf[0]);
+        out.far->add(*out.farHalf[1]);
+        out.far->scale(0.5);
     }
     out.stats.complete = !stopped;
     out.stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -599,6 +607,11 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
 double BeamFluence::at(const Vec3& y) const {
     if (mean.box().contains(y) || !far) return mean.at(y);
     return far->at(y);
+}
+
+double BeamFluence::halfDifferenceAt(const Vec3& y) const {
+    if (mean.box().contains(y) || !far) return 0.5 * (half[0].at(y) - half[1].at(y));
+    return 0.5 * (farHalf[0]->at(y) - farHalf[1]->at(y));
 }
 
 bool BeamExcitationField::contains(const Vec3& y) const {
@@ -616,12 +629,21 @@ BeamExcitationField::MeanAndHalfDifference BeamExcitationField::scatteredWithNoi
 }
 
 std::optional<double> BeamExcitationField::scatteredMeanRadiance(const Vec3& y, double lambdaNm, double coreWeight, double outsideWeight) const {
+    return weighedSum(y, lambdaNm, coreWeight, outsideWeight, &BeamFluence::at);
+}
+
+std::optional<double> BeamExcitationField::scatteredHalfDifference(const Vec3& y, double lambdaNm, double coreWeight, double outsideWeight) const {
+    return weighedSum(y, lambdaNm, coreWeight, outsideWeight, &BeamFluence::halfDifferenceAt);
+}
+
+std::optional<double> BeamExcitationField::weighedSum(const Vec3& y, double lambdaNm, double coreWeight, double outsideWeight,
+                                                      double (BeamFluence::*value)(const Vec3&) const) const {
     if (!contains(y)) return std::nullopt;
     double total = 0;
     for (const BeamFluence& f : fields_) {
         if (f.line.lambdaNm != lambdaNm) continue;
         const double w = f.line.profile->inCore(y, f.line.side, lambdaNm) ? coreWeight : outsideWeight;
-        if (w > 0) total += w * f.at(y);
+        if (w > 0) total += w * (f.*value)(y);
     }
     return total * kInv4Pi;
 }

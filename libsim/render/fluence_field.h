@@ -109,15 +109,16 @@ struct FluenceStats {
 };
 
 // The scattered light of one beam line side: φ in each half of the photons (even and odd slots), and
-// beyond the fine box, with FieldBox::hasFar, φ of all of them on the far box's nodes.
+// beyond the fine box, with FieldBox::hasFar, φ on the far box's nodes, also in halves.
 struct BeamFluence {
     BeamLineSide line;
     FluenceGrid half[2];
     FluenceGrid mean;  // (half[0] + half[1]) / 2
     FluenceStats stats;
-    std::optional<FluenceGrid> far;
+    std::optional<FluenceGrid> far, farHalf[2];
     const FieldBox& reach() const { return far ? far->box() : mean.box(); }  // where it is known
     double at(const Vec3& y) const;  // φ at y: the fine grid's inside its box, else the far one's (0 beyond)
+    double halfDifferenceAt(const Vec3& y) const;  // half the difference of the halves' φ at y: its noise
 };
 
 // Traces the field of one beam line side over `box`. The photons are split over a fixed number of slots,
@@ -141,10 +142,16 @@ public:
         double mean = 0, halfDifference = 0;
     };
     MeanAndHalfDifference scatteredWithNoise(size_t i, const Vec3& y) const;
+    // As scatteredMeanRadiance, from half the difference of the halves (fine or far): the noise of what it
+    // gives, correlated wherever the same nodes are read.
+    std::optional<double> scatteredHalfDifference(const Vec3& y, double lambdaNm, double coreWeight = 1, double outsideWeight = 1) const;
     const std::vector<BeamFluence>& fields() const { return fields_; }
     bool contains(const Vec3& y) const;  // where every field is known (their far boxes, if any)
 
 private:
+    // Σ over the fields at λ of (core or outside weight) × value(y) / 4π; none outside the reach.
+    std::optional<double> weighedSum(const Vec3& y, double lambdaNm, double coreWeight, double outsideWeight,
+                                     double (BeamFluence::*value)(const Vec3&) const) const;
     std::vector<BeamFluence> fields_;
 };
 

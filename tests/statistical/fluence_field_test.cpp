@@ -247,5 +247,42 @@ TEST(ExcitationField, CoarseLateralNodesReadTheSameFieldAwayFromTheSheetsEdges) 
     EXPECT_LT(at[0][2].mean, 0.95 * at[1][2].mean);
 }
 
+// The field's own noise, from half the difference of its halves (BeamExcitationField::scatteredHalfDifference,
+// on the fine nodes and on the far ones): over 32 independent fields, at points in and beyond the fine box,
+// the mean of its square against the variance of the fields there. With 32 fields each ratio's 4σ range is
+// about [0.4, 2.5] (F distribution, 32 and 31 degrees of freedom).
+TEST(ExcitationField, HalfDifferenceEstimatesTheFieldsSpread) {
+    const Scene scene = sheetInTissue(5.0, 0.9);
+    FieldBox box = sheetBox(0.0005);
+    box.halfZ = 0.01;
+    box.farHalfZ = 0.06;
+    box.farHz = 0.004;
+    const std::vector<Vec3> points{Vec3(0, 0, 0), Vec3(0.01, 0.005, 0.003), Vec3(0, 0, 0.014), Vec3(0.01, 0, -0.03), Vec3(-0.02, 0.01, 0.055)};
+    const std::vector<BeamLineSide> lines = beamLineSides(scene.lights);
+    constexpr int kFields = 32;
+    std::vector<double> sum(points.size()), sum2(points.size()), halfDifference2(points.size());
+    for (int s = 0; s < kFields; ++s) {
+        FluenceOptions o;
+        o.photons = 20000;
+        o.seed = 300 + static_cast<uint64_t>(s);
+        const BeamExcitationField field({traceBeamFluence(scene, lines.at(0), box, o)});
+        for (size_t i = 0; i < points.size(); ++i) {
+            const double v = *field.scatteredMeanRadiance(points[i], 561), d = *field.scatteredHalfDifference(points[i], 561);
+            sum[i] += v;
+            sum2[i] += v * v;
+            halfDifference2[i] += d * d / kFields;
+        }
+    }
+    for (size_t i = 0; i < points.size(); ++i) {
+        const double mean = sum[i] / kFields, variance = (sum2[i] - kFields * mean * mean) / (kFields - 1);
+        const double ratio = halfDifference2[i] / variance;
+        std::printf("  (%+.3f, %+.3f, %+.4f) mm%s: field %.4g, spread %.3g, half difference %.3g: ratio %.2f\n", points[i].x, points[i].y, points[i].z,
+                    box.contains(points[i]) ? "" : " (far nodes)", mean, std::sqrt(variance), std::sqrt(halfDifference2[i]), ratio);
+        ASSERT_GT(variance, 0);
+        EXPECT_GT(ratio, 0.4);
+        EXPECT_LT(ratio, 2.5);
+    }
+}
+
 }  // namespace
 }  // namespace fluorosim
