@@ -299,10 +299,10 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
             return r;
         }
         // Adaptive sampling: the field's noise reaches the photons' sources too, and through them the haze
-        // (docs/performance.md, "Where the field's noise goes"). Where the field's part, in the computed image
-        // and the traced one together, misses half the target's over the brightest tenth or 1 %: more field
-        // photons (within kMostFieldFactor times the first count), the computed image made again, the photons
-        // traced again with the pooled field.
+        // (docs/performance.md, "Weight windows"). Where the field's part, in the computed image and the traced
+        // one together, misses half the target's over the brightest tenth or 1 %: more field photons (within
+        // kMostFieldFactor times the first count), the computed image made again, the photons traced again
+        // with the pooled field.
         if (o.noiseRatio && field && traced.fieldHalfDifference.size() == computed.size()) {
             std::vector<double> variance(computed.size()), signal(computed.size());
             for (size_t i = 0; i < variance.size(); ++i) {
