@@ -564,16 +564,21 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
         for (size_t i = 0; i < pixels; ++i) out.electrons[i] += slotImages[static_cast<size_t>(s)][i];
         out.vertices += slots[static_cast<size_t>(s)].vertices;
     }
-    // The field's noise: every slot's levels, spread back to pixels, summed.
+    // The field's noise: per level the slots' sum (the spreading is linear), spread back to pixels.
     if (field) {
         out.fieldHalfDifference.assign(pixels, 0.0);
-        for (int k = 0; k < kImageLevels; ++k)
+        for (int k = 0; k < kImageLevels; ++k) {
+            std::vector<double> sum;
             for (const Slot& slot : slots) {
                 const std::vector<double>& level = slot.fieldLevel[static_cast<size_t>(k)];
                 if (level.empty()) continue;
-                const std::vector<double> spread = k == 0 ? level : poolImage(level, width, height, k);
-                for (size_t i = 0; i < pixels; ++i) out.fieldHalfDifference[i] += spread[i];
+                if (sum.empty()) sum.assign(pixels, 0.0);
+                for (size_t i = 0; i < pixels; ++i) sum[i] += level[i];
             }
+            if (sum.empty()) continue;
+            if (k > 0) sum = poolImage(sum, width, height, k);
+            for (size_t i = 0; i < pixels; ++i) out.fieldHalfDifference[i] += sum[i];
+        }
     }
     for (int s = 0; s < kSlots; ++s)
         for (size_t i = 0; i < pixels; ++i) out.variance[i] += sqr(kSlots * slotImages[static_cast<size_t>(s)][i] - out.electrons[i]);
