@@ -27,6 +27,7 @@ struct AcquireRequest {
     std::optional<std::string> exposure;  // a time ("20 ms"), or "auto" / "auto:F" (autoExpose at F of the full well, 0.5 by default)
     std::optional<int64_t> fieldPhotons;   // the excitation field's photons per beam line side and plane (0: off)
     std::optional<double> fieldMarginUm, fieldReachUm;  // how far it reaches beyond the computed region and from the focal plane
+    std::optional<double> fieldDiffuseUm;               // its diffuse light's node spacing
     std::optional<int64_t> emissionPhotons;  // the scattered emission's photons per plane and channel (0: paths carry it)
 };
 
@@ -78,6 +79,9 @@ inline void checkAcquireRequest(const AcquireRequest& a) {
     // At most 10 mm: the field's grids grow with the box.
     for (const auto& [value, option] : {std::pair{a.fieldMarginUm, "--field-margin-um"}, std::pair{a.fieldReachUm, "--field-reach-um"}})
         if (value && (!(*value >= 0) || !(*value <= 1e4))) throw ConfigError(std::string(option) + ": must lie in [0, 10000], got " + std::to_string(*value));
+    // At least 1 um: finer nodes would not fit a reach's box in memory, and the diffuse light is smooth.
+    if (a.fieldDiffuseUm && !(*a.fieldDiffuseUm == 0 || (*a.fieldDiffuseUm >= 1 && *a.fieldDiffuseUm <= 1e3)))
+        throw ConfigError("--field-diffuse-um: must be 0 (no diffuse grid) or lie in [1, 1000], got " + std::to_string(*a.fieldDiffuseUm));
     if (a.emissionPhotons && (*a.emissionPhotons < 0 || *a.emissionPhotons == 1 || *a.emissionPhotons > (int64_t(1) << 40)))
         throw ConfigError("--emission-photons: must be 0 (paths carry the scattered emission) or lie in [2, 2^40], got " + std::to_string(*a.emissionPhotons));
 }
@@ -123,6 +127,7 @@ inline AcquireOptions applyAcquireRequest(const AcquireRequest& a, const Scene& 
     if (a.fieldPhotons) o.field.photons = static_cast<uint64_t>(*a.fieldPhotons);
     if (a.fieldMarginUm) o.field.marginUm = *a.fieldMarginUm;
     if (a.fieldReachUm) o.field.reachUm = *a.fieldReachUm;
+    if (a.fieldDiffuseUm) o.field.diffuseUm = *a.fieldDiffuseUm;
     if (a.emissionPhotons) o.emission.photons = static_cast<uint64_t>(*a.emissionPhotons);
     return o;
 }

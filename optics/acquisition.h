@@ -60,6 +60,10 @@ struct ExcitationFieldOptions {
     // scattering, which the camera paths would otherwise find by sub-paths that reach the sheet by chance.
     std::optional<double> reachUm;
     double coarseAxialUm = 4, coarseLateralUm = 16;  // the far nodes' spacing (laterally at least lateralUm's)
+    // The node spacing of the diffuse light (photons that have scattered kDiffuseAfterScatterings times), over
+    // the whole reach: it varies on the scale of the transport length 1 / μs', not the sheet's waist. Unset:
+    // a tenth of the tissue's transport length, within [4, 50] um (fieldDiffuseSpacingMm); 0: no diffuse grid.
+    std::optional<double> diffuseUm;
     void validate() const;      // ConfigError naming the option and value
 };
 
@@ -120,6 +124,7 @@ struct PlaneImage {
     double fieldSeconds = 0, fieldElectrons = 0;
     double fieldLateralSpacingUm = 0;  // the node spacing along the focal plane (0: no field)
     double fieldMarginUm = 0, fieldReachUm = 0;  // how far it reaches beyond the computed region and from focus
+    double fieldDiffuseSpacingUm = 0;            // its diffuse light's node spacing (0: none)
     std::vector<double> fieldHalfDifference;
     // The computed emission's scattered light traced forward (AcquireOptions::emission): its photons, their
     // vertices imaged, its time and its photoelectrons summed over pixels (in `electrons`, its variance in

@@ -66,6 +66,7 @@ std::string AcquisitionSummary::addPlane(size_t slot, int plane, const PlaneImag
         fieldSpacingUm_ = fieldSpacingUm_ > 0 ? std::min(fieldSpacingUm_, image.fieldLateralSpacingUm) : image.fieldLateralSpacingUm;
     fieldMarginUm_ = std::max(fieldMarginUm_, image.fieldMarginUm);
     fieldReachUm_ = std::max(fieldReachUm_, image.fieldReachUm);
+    fieldDiffuseSpacingUm_ = std::max(fieldDiffuseSpacingUm_, image.fieldDiffuseSpacingUm);
     emissionPhotons_ += image.emissionPhotons;
     emissionVertices_ += image.emissionVertices;
     emissionSeconds_ += image.emissionSeconds;
@@ -145,6 +146,7 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
         {"excitation_field", "lateral_spacing_um", fieldSpacingUm_, !(fieldSpacingUm_ > 0)},
         {"excitation_field", "margin_um", fieldMarginUm_, !(fieldSpacingUm_ > 0)},
         {"excitation_field", "reach_um", fieldReachUm_, !(fieldSpacingUm_ > 0)},
+        {"excitation_field", "diffuse_spacing_um", fieldDiffuseSpacingUm_, !(fieldDiffuseSpacingUm_ > 0)},
         // Its noise (correlated across pixels; from the field's two halves) over the camera's, brightest 10 %.
         {"excitation_field", "median_noise_over_camera_variance_top10", median(budget_[kFieldPart][0]), budget_[kFieldPart][0].empty()},
         // The computed emission's scattered light, traced forward from its points (split estimator).

@@ -57,6 +57,7 @@ private:
     uint64_t fieldPhotons_ = 0;
     double fieldSeconds_ = 0, fieldSum_ = 0, fieldSpacingUm_ = 0;  // the finest lateral spacing of any plane's field
     double fieldMarginUm_ = 0, fieldReachUm_ = 0;                  // how far the fields reached (the largest)
+    double fieldDiffuseSpacingUm_ = 0;                             // their diffuse light's node spacing (the largest)
     uint64_t emissionPhotons_ = 0, emissionVertices_ = 0;
     double emissionSeconds_ = 0, emissionSum_ = 0;
     // The noise budget: each part's own noise variance over the camera's, per pixel, over the brightest 10 %

@@ -204,12 +204,14 @@ py::dict acquireScene(const py::object& sceneArg, std::optional<int> planes, con
                  std::optional<int64_t> seed, const std::vector<std::string>& channels, int threads, const std::optional<std::string>& base,
                  const std::string& estimator, std::optional<int> directSpp, std::optional<double> noiseRatio, std::optional<int> maxSpp,
                  const py::object& progress, const std::optional<std::string>& exposure, std::optional<int64_t> fieldPhotons,
-                 std::optional<int64_t> emissionPhotons, std::optional<double> fieldMarginUm, std::optional<double> fieldReachUm) {
+                 std::optional<int64_t> emissionPhotons, std::optional<double> fieldMarginUm, std::optional<double> fieldReachUm,
+                 std::optional<double> fieldDiffuseUm) {
     optics::AcquireRequest request;
     request.exposure = exposure;
     request.fieldPhotons = fieldPhotons;
     request.fieldMarginUm = fieldMarginUm;
     request.fieldReachUm = fieldReachUm;
+    request.fieldDiffuseUm = fieldDiffuseUm;
     request.emissionPhotons = emissionPhotons;
     request.planes = planes;
     request.step = step;
@@ -655,7 +657,7 @@ PYBIND11_MODULE(fluorosim, mod) {
             py::arg("threads") = 0, py::arg("base") = py::none(), py::arg("estimator") = "split", py::arg("direct_spp") = py::none(),
             py::arg("noise_ratio") = py::none(), py::arg("max_spp") = py::none(), py::arg("progress") = py::none(),
             py::arg("exposure") = py::none(), py::arg("field_photons") = py::none(), py::arg("emission_photons") = py::none(),
-            py::arg("field_margin_um") = py::none(), py::arg("field_reach_um") = py::none(),
+            py::arg("field_margin_um") = py::none(), py::arg("field_reach_um") = py::none(), py::arg("field_diffuse_um") = py::none(),
             "Acquire a light-sheet z-stack of a scene with a microscope block. Returns a dict: counts (uint16), expected and "
             "stderr (float32), each (channel, z, y, x); channels, the geometry (axes, origin_um, x/y_step_um, z_step_vector_um, "
             "pixel_size_um, z_step_um), spp, seed, exposure_s, and summary (the CLI's JSON summary as a dict). Same numbers as "
@@ -664,7 +666,9 @@ PYBIND11_MODULE(fluorosim, mod) {
             "field_photons: the excitation field's photons per beam line and plane, 0 for none; emission_photons: the photons per "
             "plane and channel that trace the computed emission's scattered light forward, default 4 per pixel, 0 to leave it to "
             "camera paths; field_margin_um and field_reach_um: how far the field reaches beyond the computed region and from the "
-            "focal plane, where the traced photons carry the dye's light, default 100 and 120 um, more in strongly scattering tissue). "
+            "focal plane, where the traced photons carry the dye's light, default 100 and 120 um, more in strongly scattering tissue; "
+            "field_diffuse_um: the node spacing of the light of photons that have scattered ten times, default a tenth of the "
+            "transport length within 4-50 um, 0 for none). "
             "progress: a callable given the fraction done (0..1), about every 0.1 s. Ctrl-C stops the run and raises "
             "KeyboardInterrupt.");
     mod.def("ground_truth", &groundTruthOf, py::arg("scene"), py::kw_only(), py::arg("planes") = py::none(), py::arg("step") = py::none(),

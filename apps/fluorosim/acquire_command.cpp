@@ -54,6 +54,7 @@ std::string fingerprint(const AcquireArgs& a, const optics::Microscope& m, const
                               {"noise_ratio", o.noiseRatio.value_or(0.0)},
                               {"max_spp", o.noiseRatio ? o.maxSpp : 0}, {"exposure_s", m.detector.exposureS},
                               {"field_photons", o.field.photons}, {"field_margin_um", o.field.marginUm.value_or(-1)}, {"field_reach_um", o.field.reachUm.value_or(-1)},
+                              {"field_diffuse_um", o.field.diffuseUm.value_or(-1)},
                               {"emission_photons", o.emission.photons ? static_cast<int64_t>(*o.emission.photons) : int64_t(-1)},
                               {"emission_photons_per_pixel", o.emission.photonsPerPixel}};
     return j.dump();
@@ -187,6 +188,9 @@ void addAcquireCommand(CLI::App& app) {
     cmd->add_option("--field-reach-um", a->fieldReachUm,
                     "Split estimator: how far (um) from the focal plane the excitation field reaches, on 4 um nodes beyond its fine 20 um; "
                     "the dye lit there by scattered light is the traced photons' (default 120, or as the margin where that is more)");
+    cmd->add_option("--field-diffuse-um", a->fieldDiffuseUm,
+                    "Split estimator: node spacing (um) of the excitation field's diffuse light (photons that have scattered 10 times), "
+                    "over its whole reach (default a tenth of the tissue's transport length 1/mu_s', within [4, 50]; 0: none)");
     cmd->add_option("--emission-photons", a->emissionPhotons,
                     "Split estimator: photons per plane and channel that trace the computed emission's scattered light forward and image "
                     "their vertices, where the tissue scatters the detected light (default 4 per pixel: 262144 on a 256 x 256 plane; 0: camera paths "

@@ -192,6 +192,13 @@ FieldBox FieldBox::far() const {
     return b;
 }
 
+FieldBox FieldBox::diffuse() const {
+    FieldBox b = far();
+    b.hx = b.hy = b.hz = diffuseH;
+    b.diffuseH = 0;
+    return b;
+}
+
 void FieldBox::validate() const {
     auto positive = [](double v, const char* what) {
         if (!(v > 0) || !std::isfinite(v)) throw ConfigError(std::string("excitation field: ") + what + " must be positive and finite, got " + number(v));
@@ -204,6 +211,7 @@ void FieldBox::validate() const {
     positive(hz, "node spacing along the axis");
     for (double v : {farHalfX, farHalfY, farHalfZ})
         if (!(v >= 0) || !std::isfinite(v)) throw ConfigError("excitation field: a far half extent must be >= 0 and finite, got " + number(v));
+    if (!(diffuseH >= 0) || !std::isfinite(diffuseH)) throw ConfigError("excitation field: the diffuse node spacing must be >= 0 and finite, got " + number(diffuseH));
     if (hasFar()) {
         positive(farHz, "far node spacing along the axis");
         positive(farHxy, "far node spacing along the focal plane");
@@ -338,6 +346,9 @@ BeamFluence pooledFluence(const BeamFluence& a, const BeamFluence& b) {
     if (out.far && b.far) pool(*out.far, *b.far);
     for (int k = 0; k < 2; ++k)
         if (out.farHalf[k] && b.farHalf[k]) pool(*out.farHalf[k], *b.farHalf[k]);
+    if (out.diffuse && b.diffuse) pool(*out.diffuse, *b.diffuse);
+    for (int k = 0; k < 2; ++k)
+        if (out.diffuseHalf[k] && b.diffuseHalf[k]) pool(*out.diffuseHalf[k], *b.diffuseHalf[k]);
     out.stats.photons += b.stats.photons;
     out.stats.sourced += b.stats.sourced;
     out.stats.truncated += b.stats.truncated;
@@ -386,9 +397,11 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
     const FluenceGrid empty(box);
     const FieldBox reach = box.far();
     const std::optional<FluenceGrid> emptyFar = box.hasFar() ? std::optional<FluenceGrid>(FluenceGrid(reach)) : std::nullopt;
-    requireMemory(8.0 * static_cast<double>(empty.nodes() + (emptyFar ? emptyFar->nodes() : 0)) * (kSlots + 3), "the excitation field's grids");
+    const std::optional<FluenceGrid> emptyDiffuse = box.diffuseH > 0 ? std::optional<FluenceGrid>(FluenceGrid(box.diffuse())) : std::nullopt;
+    requireMemory(8.0 * static_cast<double>(empty.nodes() + (emptyFar ? emptyFar->nodes() : 0) + (emptyDiffuse ? emptyDiffuse->nodes() : 0)) * (kSlots + 3),
+                  "the excitation field's grids");
     std::vector<FluenceGrid> slots(kSlots, empty);
-    std::vector<std::optional<FluenceGrid>> farSlots(kSlots, emptyFar);
+    std::vector<std::optional<FluenceGrid>> farSlots(kSlots, emptyFar), diffuseSlots(kSlots, emptyDiffuse);
     struct SlotStats {
         uint64_t sourced = 0, truncated = 0;
         double source = 0;
@@ -434,7 +447,8 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
         weight /= kRouletteSurvival;
         return true;
     };
-    auto tracePhoton = [&](uint64_t index, FluenceGrid& grid, std::optional<FluenceGrid>& farGrid, SlotStats& st) {
+    auto tracePhoton = [&](uint64_t index, FluenceGrid& grid, std::optional<FluenceGrid>& farGrid, std::optional<FluenceGrid>& diffuseGrid,
+                           SlotStats& st) {
         Rng rng = Rng::forKey(options.seed, index, seedKey);
         Vec3 onAxis;
         double pdfAxis = 0;
@@ -464,6 +478,7 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
             Ray ray;
             int medium;
             double weight, tMin;
+            int scatterings = 0;
         };
         double pdf = 0;
         std::vector<Walker> pending{{Ray{y, source.phase().sample(d, rng.uniform(), rng.uniform(), &pdf)}, sourceMedium, sourcePower, 0.0}};
@@ -478,6 +493,7 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
             double& weight = w.weight;
             double& tMin = w.tMin;
             int medium = w.medium;
+            int& scatterings = w.scatterings;
             const Medium* med = &scene.media[static_cast<size_t>(medium)];
             for (int events = 0;; ++events) {
                 if (events >= options.maxEvents) {
@@ -508,12 +524,17 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
                         collided = true;
                     }
                 }
-                grid.deposit(ray.o, ray.at(end), weight);
-                if (farGrid) depositFar(*farGrid, ray.o, ray.at(end), weight);
+                if (diffuseGrid && scatterings >= kDiffuseAfterScatterings) {
+                    diffuseGrid->deposit(ray.o, ray.at(end), weight);
+                } else {
+                    grid.deposit(ray.o, ray.at(end), weight);
+                    if (farGrid) depositFar(*farGrid, ray.o, ray.at(end), weight);
+                }
                 if (collided) {
                     const Vec3 p = ray.at(end);
                     const MediumSample c = med->spectra(wl).at(ch.data());
                     if (!(rng.uniform() * (c.sigmaA[0] + c.sigmaS[0]) < c.sigmaS[0])) return;  // absorbed
+                    ++scatterings;
                     const Vec3 arrived = ray.d;
                     auto direction = [&] { return med->phase().sample(arrived, rng.uniform(), rng.uniform(), &pdf); };
                     if (!window) {
@@ -525,7 +546,7 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
                     const int copies = copiesGoingOn(q, copiesLeft, rng);
                     if (copies == 0) return;
                     weight /= q;
-                    for (int k = 1; k < copies; ++k) pending.push_back({Ray{p, direction()}, medium, weight, 0.0});
+                    for (int k = 1; k < copies; ++k) pending.push_back({Ray{p, direction()}, medium, weight, 0.0, scatterings});
                     ray = Ray{p, direction()};
                     continue;
                 }
@@ -571,7 +592,7 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
                 stopped = true;
                 return;
             }
-            tracePhoton(i, slots[slot], farSlots[slot], slotStats[slot]);
+            tracePhoton(i, slots[slot], farSlots[slot], diffuseSlots[slot], slotStats[slot]);
         }
     });
 
@@ -599,19 +620,32 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
         out.far->add(*out.farHalf[1]);
         out.far->scale(0.5);
     }
+    if (emptyDiffuse) {
+        for (int h = 0; h < 2; ++h) {
+            out.diffuseHalf[h] = emptyDiffuse;
+            for (size_t s = static_cast<size_t>(h); s < diffuseSlots.size(); s += 2) out.diffuseHalf[h]->add(*diffuseSlots[s]);
+            out.diffuseHalf[h]->normalise(static_cast<double>((options.photons + 1 - static_cast<uint64_t>(h)) / 2));
+        }
+        out.diffuse = emptyDiffuse;
+        out.diffuse->add(*out.diffuseHalf[0]);
+        out.diffuse->add(*out.diffuseHalf[1]);
+        out.diffuse->scale(0.5);
+    }
     out.stats.complete = !stopped;
     out.stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return out;
 }
 
 double BeamFluence::at(const Vec3& y) const {
-    if (mean.box().contains(y) || !far) return mean.at(y);
-    return far->at(y);
+    const double spread = diffuse ? diffuse->at(y) : 0.0;
+    if (mean.box().contains(y) || !far) return mean.at(y) + spread;
+    return far->at(y) + spread;
 }
 
 double BeamFluence::halfDifferenceAt(const Vec3& y) const {
-    if (mean.box().contains(y) || !far) return 0.5 * (half[0].at(y) - half[1].at(y));
-    return 0.5 * (farHalf[0]->at(y) - farHalf[1]->at(y));
+    const double spread = diffuse ? 0.5 * (diffuseHalf[0]->at(y) - diffuseHalf[1]->at(y)) : 0.0;
+    if (mean.box().contains(y) || !far) return 0.5 * (half[0].at(y) - half[1].at(y)) + spread;
+    return 0.5 * (farHalf[0]->at(y) - farHalf[1]->at(y)) + spread;
 }
 
 bool BeamExcitationField::contains(const Vec3& y) const {
@@ -625,7 +659,13 @@ BeamExcitationField::MeanAndHalfDifference BeamExcitationField::scatteredWithNoi
     const BeamFluence& f = fields_.at(i);
     const auto s = f.mean.stencil(y);  // the halves share the mean's box
     if (!s) return {};
-    return {f.mean.at(*s), 0.5 * (f.half[0].at(*s) - f.half[1].at(*s))};
+    MeanAndHalfDifference out{f.mean.at(*s), 0.5 * (f.half[0].at(*s) - f.half[1].at(*s))};
+    if (f.diffuse)
+        if (const auto d = f.diffuse->stencil(y)) {
+            out.mean += f.diffuse->at(*d);
+            out.halfDifference += 0.5 * (f.diffuseHalf[0]->at(*d) - f.diffuseHalf[1]->at(*d));
+        }
+    return out;
 }
 
 std::optional<double> BeamExcitationField::scatteredMeanRadiance(const Vec3& y, double lambdaNm, double coreWeight, double outsideWeight) const {

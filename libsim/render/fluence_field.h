@@ -32,9 +32,14 @@ struct FieldBox {
     double halfX = 0, halfY = 0, halfZ = 0;
     double hx = 0.004, hy = 0.004, hz = 0.0005;
     double farHalfX = 0, farHalfY = 0, farHalfZ = 0, farHz = 0.004, farHxy = 0.016;
+    // With a positive spacing, the light of photons that have scattered kDiffuseAfterScatterings times is
+    // tallied apart, over the whole reach on nodes this far apart (mm): it has forgotten where it left the
+    // beam, and varies on the scale of the transport length, not the sheet's waist.
+    double diffuseH = 0;
     bool contains(const Vec3& p) const;  // the fine box
     bool hasFar() const { return farHalfX > halfX || farHalfY > halfY || farHalfZ > halfZ; }
     FieldBox far() const;     // the far box on the far spacing (itself without one)
+    FieldBox diffuse() const;  // the far box (or itself) on the diffuse spacing
     void validate() const;  // ConfigError naming the field and value
 };
 
@@ -91,6 +96,9 @@ std::vector<BeamLineSide> beamLineSides(const std::vector<Light>& lights);
 
 // The largest extinction (σa + σs, /mm) of any of the scene's media at λ, at its channels' largest values.
 double largestExtinctionAt(const Scene& scene, double lambdaNm);
+// Photons that have scattered this many times are diffuse (FieldBox::diffuseH): in uncleared cortex (σs 20 /mm,
+// g 0.9) all the light that reaches the field of view 1 mm from where the sheet enters has, at σs 2 /mm 0.1 %.
+constexpr int kDiffuseAfterScatterings = 10;
 
 struct FluenceOptions {
     uint64_t photons = 200000;  // per beam line side
@@ -116,6 +124,8 @@ struct BeamFluence {
     FluenceGrid mean;  // (half[0] + half[1]) / 2
     FluenceStats stats;
     std::optional<FluenceGrid> far, farHalf[2];
+    // With FieldBox::diffuseH, the diffuse photons' φ over the reach, added to the others' everywhere.
+    std::optional<FluenceGrid> diffuse, diffuseHalf[2];
     const FieldBox& reach() const { return far ? far->box() : mean.box(); }  // where it is known
     double at(const Vec3& y) const;  // φ at y: the fine grid's inside its box, else the far one's (0 beyond)
     double halfDifferenceAt(const Vec3& y) const;  // half the difference of the halves' φ at y: its noise

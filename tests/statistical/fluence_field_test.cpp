@@ -247,6 +247,63 @@ TEST(ExcitationField, CoarseLateralNodesReadTheSameFieldAwayFromTheSheetsEdges) 
     EXPECT_LT(at[0][2].mean, 0.95 * at[1][2].mean);
 }
 
+// In strongly scattering tissue (σs 20 /mm, g 0.9, the sheet 400 um in) much of the light near the sheet has
+// scattered ten times and more. The same photons (six seeds) tallied with that light on 50 um diffuse nodes
+// (FieldBox::diffuseH) and on the fine and far nodes alone read the same field, averaged along lines of 21
+// points 50 um long in and beyond the fine box: their paired difference is within 4 of its standard errors of 0
+// plus 1 % of the field (the diffuse nodes' stated resolution error; measured up to 0.6 %, 40 um from the sheet
+// where the field curves most within a node), and those are within 5 % of the field. Whether they lower the
+// noise depends on what is read: at a point on the sheet's plane the light that scattered a few times (still on
+// fine nodes) is most of the noise, and a field far from the sheet's entry is limited by how many photons arrive
+// at all; over a small bright structure 1 mm from it they do (docs/performance.md). The noise is printed.
+TEST(ExcitationField, DiffuseNodesReadTheSameField) {
+    const Scene scene = sheetInTissue(20.0, 0.9);
+    const std::vector<BeamLineSide> lines = beamLineSides(scene.lights);
+    FieldBox box = sheetBox(0.0005);
+    box.halfZ = 0.01;
+    box.farHalfZ = 0.06;
+    box.farHz = 0.004;
+    const std::vector<Vec3> points{Vec3(0, 0, 0), Vec3(0, 0.01, 0.005), Vec3(0, 0, 0.014), Vec3(0, -0.01, -0.04)};  // the lines' centres
+    constexpr int kSeeds = 6;
+    // [without, with the diffuse nodes][point][seed]
+    std::array<std::vector<std::array<double, kSeeds>>, 2> v{std::vector<std::array<double, kSeeds>>(points.size()),
+                                                           std::vector<std::array<double, kSeeds>>(points.size())};
+    auto centre = v;  // at the lines' centres alone
+    for (int seed = 0; seed < kSeeds; ++seed)
+        for (int d = 0; d < 2; ++d) {
+            FieldBox b = box;
+            b.diffuseH = d == 0 ? 0.0 : 0.05;
+            FluenceOptions o;
+            o.photons = 400000;
+            o.seed = 100 + static_cast<uint64_t>(seed);
+            const BeamExcitationField field({traceBeamFluence(scene, lines.at(0), b, o)});
+            for (size_t i = 0; i < points.size(); ++i)
+                for (int k = -10; k <= 10; ++k) {
+                    const double phi = *field.scatteredMeanRadiance(points[i] + Vec3(0.0025 * k, 0, 0), 561);
+                    v[static_cast<size_t>(d)][i][static_cast<size_t>(seed)] += phi / 21;
+                    if (k == 0) centre[static_cast<size_t>(d)][i][static_cast<size_t>(seed)] = phi;
+                }
+        }
+    auto meanAndError = [](const std::array<double, kSeeds>& x) {
+        double m = 0, m2 = 0;
+        for (double a : x) m += a / kSeeds;
+        for (double a : x) m2 += sqr(a - m);
+        return Estimate{m, std::sqrt(m2 / (kSeeds - 1) / kSeeds)};
+    };
+    for (size_t i = 0; i < points.size(); ++i) {
+        std::array<double, kSeeds> difference{};
+        for (size_t s = 0; s < kSeeds; ++s) difference[s] = v[1][i][s] - v[0][i][s];
+        const Estimate plain = meanAndError(v[0][i]), diffuse = meanAndError(v[1][i]), d = meanAndError(difference);
+        std::printf("  (%+.3f, %+.3f, %+.4f) mm%s: phi %.5g +- %.2g without diffuse nodes, %.5g +- %.2g with; difference %+.3g +- %.2g (%+.2f %%)\n",
+                    points[i].x, points[i].y, points[i].z, box.contains(points[i]) ? "" : " (far nodes)", plain.mean, plain.stderr, diffuse.mean,
+                    diffuse.stderr, d.mean, d.stderr, 100 * d.mean / plain.mean);
+        EXPECT_LT(std::abs(d.mean), 4 * d.stderr + 0.01 * plain.mean);
+        EXPECT_LT(4 * d.stderr, 0.05 * plain.mean) << "the comparison must be sharp";
+        const Estimate a = meanAndError(centre[0][i]), b = meanAndError(centre[1][i]);
+        std::printf("    at its centre: relative standard error %.2f %% without, %.2f %% with\n", 100 * a.stderr / a.mean, 100 * b.stderr / b.mean);
+    }
+}
+
 // The field's own noise, from half the difference of its halves (BeamExcitationField::scatteredHalfDifference,
 // on the fine nodes and on the far ones): over 32 independent fields, at points in and beyond the fine box,
 // the mean of its square against the variance of the fields there. With 32 fields each ratio's 4σ range is
