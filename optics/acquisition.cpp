@@ -290,7 +290,9 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                                 scattersEmission && tracer.fluorescence().model() == FluorescenceModel::Full && !o.labels;
     if (emissionTraced) {
         std::optional<PathImaging> covered;
+        double discardedSeconds = 0;  // a pass traced again with more field is time spent all the same
         auto traceEmission = [&] {
+            discardedSeconds += traced.seconds;
             covered.emplace(imaging, model, emissionPoints.get(), imaging.centre(), o.poolingFraction);
             traced = traceScatteredEmission(scene, tracer, imaging, *covered, *emissionPoints, field.get(), detection, detector.exposureS, o.emission,
                                             o.seed, streamKey, o.threads, o.cancel);
@@ -348,7 +350,7 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         }
         r.emissionPhotons = traced.photons;
         r.emissionVertices = traced.vertices;
-        r.emissionSeconds = traced.seconds;
+        r.emissionSeconds = traced.seconds + discardedSeconds;
         r.emissionVariance = traced.variance;
         r.emissionEstimates = traced.slots;
         for (size_t i = 0; i < computed.size(); ++i) {

@@ -497,9 +497,11 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
             const bool computed = covered.computesUnscatteredAt(p);
             for (size_t l = 0; l < lines.size(); ++l) {
                 excitation[l] = computed ? tracer.coreMeanRadiance(p, medium, lines[l], field, rng) : 0.0;
-                excitationNoise[l] = computed && field ? field->scatteredHalfDifference(p, lines[l], 1.0, 0.0).value_or(0.0) : 0.0;
-                beyond[l] = fromLattice ? 0.0 : field->scatteredMeanRadiance(p, lines[l], computed ? 0.0 : 1.0, 1.0).value_or(0.0);
-                beyondNoise[l] = fromLattice ? 0.0 : field->scatteredHalfDifference(p, lines[l], computed ? 0.0 : 1.0, 1.0).value_or(0.0);
+                const auto phi = field && (computed || !fromLattice) ? field->scatteredByCore(p, lines[l]) : std::nullopt;
+                const BeamExcitationField::CoreAndOutside parts = phi.value_or(BeamExcitationField::CoreAndOutside{});
+                excitationNoise[l] = computed ? parts.core.halfDifference : 0.0;
+                beyond[l] = fromLattice ? 0.0 : (computed ? 0.0 : parts.core.mean) + parts.outside.mean;
+                beyondNoise[l] = fromLattice ? 0.0 : (computed ? 0.0 : parts.core.halfDifference) + parts.outside.halfDifference;
                 // Beyond the computed part, inside the field's box, the beams' core emission is the photons' too.
                 if (!fromLattice && !computed && out.tracesBeamLit(p, medium)) beyond[l] += tracer.coreMeanRadiance(p, medium, lines[l], nullptr, rng);
                 lit = excitation[l] + beyond[l] > 0 || lit;

@@ -158,10 +158,6 @@ private:
     double total_ = 0;
 };
 
-}  // namespace
-
-namespace {
-
 // Narrows [t0, t1] to where the segment's coordinate, ua + t (ub − ua), lies in [lo, hi]; false when nothing is left.
 bool clipToSlab(double ua, double ub, double lo, double hi, double& t0, double& t1) {
     if (std::abs(ub - ua) < 1e-300) return ua >= lo && ua <= hi && t1 > t0;
@@ -648,6 +644,22 @@ double BeamFluence::halfDifferenceAt(const Vec3& y) const {
     return 0.5 * (farHalf[0]->at(y) - farHalf[1]->at(y)) + spread;
 }
 
+BeamFluence::MeanAndHalfDifference BeamFluence::withNoiseAt(const Vec3& y) const {
+    MeanAndHalfDifference out;
+    auto read = [&](const FluenceGrid& m, const FluenceGrid& h0, const FluenceGrid& h1) {
+        if (const auto s = m.stencil(y)) {
+            out.mean += m.at(*s);
+            out.halfDifference += 0.5 * (h0.at(*s) - h1.at(*s));
+        }
+    };
+    if (mean.box().contains(y) || !far)
+        read(mean, half[0], half[1]);
+    else
+        read(*far, *farHalf[0], *farHalf[1]);
+    if (diffuse) read(*diffuse, *diffuseHalf[0], *diffuseHalf[1]);
+    return out;
+}
+
 bool BeamExcitationField::contains(const Vec3& y) const {
     if (fields_.empty()) return false;
     for (const BeamFluence& f : fields_)
@@ -670,6 +682,19 @@ BeamExcitationField::MeanAndHalfDifference BeamExcitationField::scatteredWithNoi
 
 std::optional<double> BeamExcitationField::scatteredMeanRadiance(const Vec3& y, double lambdaNm, double coreWeight, double outsideWeight) const {
     return weighedSum(y, lambdaNm, coreWeight, outsideWeight, &BeamFluence::at);
+}
+
+std::optional<BeamExcitationField::CoreAndOutside> BeamExcitationField::scatteredByCore(const Vec3& y, double lambdaNm) const {
+    if (!contains(y)) return std::nullopt;
+    CoreAndOutside out;
+    for (const BeamFluence& f : fields_) {
+        if (f.line.lambdaNm != lambdaNm) continue;
+        MeanAndHalfDifference& into = f.line.profile->inCore(y, f.line.side, lambdaNm) ? out.core : out.outside;
+        const MeanAndHalfDifference v = f.withNoiseAt(y);
+        into.mean += v.mean * kInv4Pi;
+        into.halfDifference += v.halfDifference * kInv4Pi;
+    }
+    return out;
 }
 
 std::optional<double> BeamExcitationField::scatteredHalfDifference(const Vec3& y, double lambdaNm, double coreWeight, double outsideWeight) const {

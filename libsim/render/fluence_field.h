@@ -129,6 +129,11 @@ struct BeamFluence {
     const FieldBox& reach() const { return far ? far->box() : mean.box(); }  // where it is known
     double at(const Vec3& y) const;  // φ at y: the fine grid's inside its box, else the far one's (0 beyond)
     double halfDifferenceAt(const Vec3& y) const;  // half the difference of the halves' φ at y: its noise
+    // Both, from one trilinear stencil per grid.
+    struct MeanAndHalfDifference {
+        double mean = 0, halfDifference = 0;
+    };
+    MeanAndHalfDifference withNoiseAt(const Vec3& y) const;
 };
 
 // Traces the field of one beam line side over `box`. The photons are split over a fixed number of slots,
@@ -146,12 +151,17 @@ class BeamExcitationField final : public ExcitationField {
 public:
     explicit BeamExcitationField(std::vector<BeamFluence> fields) : fields_(std::move(fields)) {}
     std::optional<double> scatteredMeanRadiance(const Vec3& y, double lambdaNm, double coreWeight = 1, double outsideWeight = 1) const override;
-    // φ of field `i` at y (W/m²): its mean, and half the difference of its halves (its noise), from one
-    // trilinear stencil.
-    struct MeanAndHalfDifference {
-        double mean = 0, halfDifference = 0;
-    };
+    // φ of field `i` at y (W/m²) in the fine box (none beyond): its mean, and half the difference of its halves
+    // (its noise), from one trilinear stencil per grid.
+    using MeanAndHalfDifference = BeamFluence::MeanAndHalfDifference;
     MeanAndHalfDifference scatteredWithNoise(size_t i, const Vec3& y) const;
+    // The mean radiance of the scattered light at y at λ, and its half difference, from the fields whose beam's
+    // core holds y and from the others apart (as scatteredMeanRadiance with weights 1, 0 and 0, 1), in one
+    // look-up of each field; none outside the reach.
+    struct CoreAndOutside {
+        MeanAndHalfDifference core, outside;
+    };
+    std::optional<CoreAndOutside> scatteredByCore(const Vec3& y, double lambdaNm) const;
     // As scatteredMeanRadiance, from half the difference of the halves (fine or far): the noise of what it
     // gives, correlated wherever the same nodes are read.
     std::optional<double> scatteredHalfDifference(const Vec3& y, double lambdaNm, double coreWeight = 1, double outsideWeight = 1) const;
