@@ -34,6 +34,13 @@ struct ScatteredEmissionOptions {
     double photonsPerPixel = 4;
     uint64_t photonsFor(size_t pixels) const;
     int directions = 4;                    // per vertex imaged, pooled or not
+    // The share of photons that leave their source into a cone about the axis toward the objective, 15° wider
+    // than the collection cone's half-angle, where the tissue above the focus is thin (times e^{-τ}, τ its
+    // scattering optical depth along the axis); the rest leave uniformly, and every photon is weighed by the
+    // isotropic emission over the mixture's density. There the light that reaches the image after scattering
+    // is mostly light that left toward the objective and scattered forward once: drawn isotropically, a few
+    // photons carried it with large weights (docs/performance.md, "Photons toward the objective"). In [0, 1).
+    double towardObjective = 0.7;
     void validate() const;                 // ConfigError naming the field and value
 };
 
