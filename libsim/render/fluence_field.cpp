@@ -605,28 +605,22 @@ BeamFluence traceBeamFluence(const Scene& scene, const BeamLineSide& line, const
     out.mean.add(out.half[0]);
     out.mean.add(out.half[1]);
     out.mean.scale(0.5);
-    if (emptyFar) {
+    // A grid's halves (even and odd slots) normalised, and their mean.
+    auto halvesAndMean = [&](const std::optional<FluenceGrid>& zero, const std::vector<std::optional<FluenceGrid>>& perSlot,
+                             std::optional<FluenceGrid> (&halves)[2], std::optional<FluenceGrid>& mean) {
+        if (!zero) return;
         for (int h = 0; h < 2; ++h) {
-            out.farHalf[h] = emptyFar;
-            for (size_t s = static_cast<size_t>(h); s < farSlots.size(); s += 2) out.farHalf[h]->add(*farSlots[s]);
-            out.farHalf[h]->normalise(static_cast<double>((options.photons + 1 - static_cast<uint64_t>(h)) / 2));
+            halves[h] = zero;
+            for (size_t s = static_cast<size_t>(h); s < perSlot.size(); s += 2) halves[h]->add(*perSlot[s]);
+            halves[h]->normalise(static_cast<double>((options.photons + 1 - static_cast<uint64_t>(h)) / 2));
         }
-        out.far = emptyFar;
-        out.far->add(*out.farHalf[0]);
-        out.far->add(*out.farHalf[1]);
-        out.far->scale(0.5);
-    }
-    if (emptyDiffuse) {
-        for (int h = 0; h < 2; ++h) {
-            out.diffuseHalf[h] = emptyDiffuse;
-            for (size_t s = static_cast<size_t>(h); s < diffuseSlots.size(); s += 2) out.diffuseHalf[h]->add(*diffuseSlots[s]);
-            out.diffuseHalf[h]->normalise(static_cast<double>((options.photons + 1 - static_cast<uint64_t>(h)) / 2));
-        }
-        out.diffuse = emptyDiffuse;
-        out.diffuse->add(*out.diffuseHalf[0]);
-        out.diffuse->add(*out.diffuseHalf[1]);
-        out.diffuse->scale(0.5);
-    }
+        mean = zero;
+        mean->add(*halves[0]);
+        mean->add(*halves[1]);
+        mean->scale(0.5);
+    };
+    halvesAndMean(emptyFar, farSlots, out.farHalf, out.far);
+    halvesAndMean(emptyDiffuse, diffuseSlots, out.diffuseHalf, out.diffuse);
     out.stats.complete = !stopped;
     out.stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return out;
