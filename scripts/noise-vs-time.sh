@@ -7,11 +7,12 @@
 # all, equal in both renders). Tissues: clear, the sample's (sigma_s 1 /mm), sigma_s 2 /mm and uncleared
 # cortex (sigma_s 20 /mm, g 0.9). Estimators: the fourteenth session's default, the field only over the
 # computed region (--field-margin-um 0 --field-reach-um 0); the default (the scattered emission traced
-# forward, 2^18 photons per plane and channel with each vertex in 4 directions, the field at 200 000 photons
-# reaching 100 um beyond the computed region and 120 um from the focal plane, or 0.15 mm^2 x the tissue's
-# reduced scattering coefficient where that is more (300 um in cortex), where the photons carry the dye's
-# light, 2 paths per pixel as README command 1 runs); the default adaptively (the paths, the traced photons
-# and the field).
+# forward, 2^18 photons per plane and channel with each vertex in 4 directions, a share 0.7 e^-tau of them
+# leaving toward the objective, the field at 200 000 photons reaching 100 um beyond the computed region and
+# 120 um from the focal plane, or 0.15 mm^2 x the tissue's reduced scattering coefficient where that is more
+# (300 um in cortex), where the photons carry the dye's light, its diffuse light on nodes a tenth of the
+# transport length apart (within 4-50 um), 2 paths per pixel as README command 1 runs); the default
+# adaptively (the paths, the traced photons and the field).
 # The last three columns give the first seed's noise budget (the summary's `noise_budget`: each part's own
 # median noise variance over the camera's, brightest 10 % / brightest 1 %).
 # Usage: scripts/noise-vs-time.sh [build/apps/fluorosim] > table.md
