@@ -632,12 +632,6 @@ double BeamFluence::at(const Vec3& y) const {
     return far->at(y) + spread;
 }
 
-double BeamFluence::halfDifferenceAt(const Vec3& y) const {
-    const double spread = diffuse ? 0.5 * (diffuseHalf[0]->at(y) - diffuseHalf[1]->at(y)) : 0.0;
-    if (mean.box().contains(y) || !far) return 0.5 * (half[0].at(y) - half[1].at(y)) + spread;
-    return 0.5 * (farHalf[0]->at(y) - farHalf[1]->at(y)) + spread;
-}
-
 BeamFluence::MeanAndHalfDifference BeamFluence::withNoiseAt(const Vec3& y) const {
     MeanAndHalfDifference out;
     auto read = [&](const FluenceGrid& m, const FluenceGrid& h0, const FluenceGrid& h1) {
@@ -663,19 +657,18 @@ bool BeamExcitationField::contains(const Vec3& y) const {
 
 BeamExcitationField::MeanAndHalfDifference BeamExcitationField::scatteredWithNoise(size_t i, const Vec3& y) const {
     const BeamFluence& f = fields_.at(i);
-    const auto s = f.mean.stencil(y);  // the halves share the mean's box
-    if (!s) return {};
-    MeanAndHalfDifference out{f.mean.at(*s), 0.5 * (f.half[0].at(*s) - f.half[1].at(*s))};
-    if (f.diffuse)
-        if (const auto d = f.diffuse->stencil(y)) {
-            out.mean += f.diffuse->at(*d);
-            out.halfDifference += 0.5 * (f.diffuseHalf[0]->at(*d) - f.diffuseHalf[1]->at(*d));
-        }
-    return out;
+    return f.mean.box().contains(y) ? f.withNoiseAt(y) : MeanAndHalfDifference{};
 }
 
 std::optional<double> BeamExcitationField::scatteredMeanRadiance(const Vec3& y, double lambdaNm, double coreWeight, double outsideWeight) const {
-    return weighedSum(y, lambdaNm, coreWeight, outsideWeight, &BeamFluence::at);
+    if (!contains(y)) return std::nullopt;
+    double total = 0;
+    for (const BeamFluence& f : fields_) {
+        if (f.line.lambdaNm != lambdaNm) continue;
+        const double w = f.line.profile->inCore(y, f.line.side, lambdaNm) ? coreWeight : outsideWeight;
+        if (w > 0) total += w * f.at(y);
+    }
+    return total * kInv4Pi;
 }
 
 std::optional<BeamExcitationField::CoreAndOutside> BeamExcitationField::scatteredByCore(const Vec3& y, double lambdaNm) const {
@@ -691,20 +684,5 @@ std::optional<BeamExcitationField::CoreAndOutside> BeamExcitationField::scattere
     return out;
 }
 
-std::optional<double> BeamExcitationField::scatteredHalfDifference(const Vec3& y, double lambdaNm, double coreWeight, double outsideWeight) const {
-    return weighedSum(y, lambdaNm, coreWeight, outsideWeight, &BeamFluence::halfDifferenceAt);
-}
-
-std::optional<double> BeamExcitationField::weighedSum(const Vec3& y, double lambdaNm, double coreWeight, double outsideWeight,
-                                                      double (BeamFluence::*value)(const Vec3&) const) const {
-    if (!contains(y)) return std::nullopt;
-    double total = 0;
-    for (const BeamFluence& f : fields_) {
-        if (f.line.lambdaNm != lambdaNm) continue;
-        const double w = f.line.profile->inCore(y, f.line.side, lambdaNm) ? coreWeight : outsideWeight;
-        if (w > 0) total += w * (f.*value)(y);
-    }
-    return total * kInv4Pi;
-}
 
 }  // namespace fluorosim

@@ -128,8 +128,7 @@ struct BeamFluence {
     std::optional<FluenceGrid> diffuse, diffuseHalf[2];
     const FieldBox& reach() const { return far ? far->box() : mean.box(); }  // where it is known
     double at(const Vec3& y) const;  // φ at y: the fine grid's inside its box, else the far one's (0 beyond)
-    double halfDifferenceAt(const Vec3& y) const;  // half the difference of the halves' φ at y: its noise
-    // Both, from one trilinear stencil per grid.
+    // φ at y and half the difference of the halves' φ there (its noise), from one trilinear stencil per grid.
     struct MeanAndHalfDifference {
         double mean = 0, halfDifference = 0;
     };
@@ -162,16 +161,10 @@ public:
         MeanAndHalfDifference core, outside;
     };
     std::optional<CoreAndOutside> scatteredByCore(const Vec3& y, double lambdaNm) const;
-    // As scatteredMeanRadiance, from half the difference of the halves (fine or far): the noise of what it
-    // gives, correlated wherever the same nodes are read.
-    std::optional<double> scatteredHalfDifference(const Vec3& y, double lambdaNm, double coreWeight = 1, double outsideWeight = 1) const;
     const std::vector<BeamFluence>& fields() const { return fields_; }
     bool contains(const Vec3& y) const;  // where every field is known (their far boxes, if any)
 
 private:
-    // Σ over the fields at λ of (core or outside weight) × value(y) / 4π; none outside the reach.
-    std::optional<double> weighedSum(const Vec3& y, double lambdaNm, double coreWeight, double outsideWeight,
-                                     double (BeamFluence::*value)(const Vec3&) const) const;
     std::vector<BeamFluence> fields_;
 };
 

@@ -304,7 +304,7 @@ TEST(ExcitationField, DiffuseNodesReadTheSameField) {
     }
 }
 
-// The field's own noise, from half the difference of its halves (BeamExcitationField::scatteredHalfDifference,
+// The field's own noise, from half the difference of its halves (BeamExcitationField::scatteredByCore,
 // on the fine nodes and on the far ones): over 32 independent fields, at points in and beyond the fine box,
 // the mean of its square against the variance of the fields there. With 32 fields each ratio's 4σ range is
 // about [0.4, 2.5] (F distribution, 32 and 31 degrees of freedom).
@@ -324,7 +324,8 @@ TEST(ExcitationField, HalfDifferenceEstimatesTheFieldsSpread) {
         o.seed = 300 + static_cast<uint64_t>(s);
         const BeamExcitationField field({traceBeamFluence(scene, lines.at(0), box, o)});
         for (size_t i = 0; i < points.size(); ++i) {
-            const double v = *field.scatteredMeanRadiance(points[i], 561), d = *field.scatteredHalfDifference(points[i], 561);
+            const auto parts = *field.scatteredByCore(points[i], 561);
+            const double v = *field.scatteredMeanRadiance(points[i], 561), d = parts.core.halfDifference + parts.outside.halfDifference;
             sum[i] += v;
             sum2[i] += v * v;
             halfDifference2[i] += d * d / kFields;
