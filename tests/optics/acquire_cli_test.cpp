@@ -461,6 +461,8 @@ TEST(AcquireCli, BadNumbersAreRejectedNotCast) {
         {{}, {"--field-photons", "-5"}, {"--field-photons", "-5"}},
         {{}, {"--field-margin-um", "-3"}, {"--field-margin-um", "[0, 10000]", "-3"}},
         {{}, {"--field-reach-um", "nan"}, {"--field-reach-um", "nan"}},
+        {{}, {"--field-diffuse-um", "-3"}, {"--field-diffuse-um", "[1, 1000]", "-3"}},
+        {{}, {"--field-diffuse-um", "0.5"}, {"--field-diffuse-um", "[1, 1000]", "0.5"}},
         {{}, {"--emission-photons", "1"}, {"--emission-photons", "[2, 2^40]", "1"}},
         {{}, {"--emission-photons", "-3"}, {"--emission-photons", "-3"}},
     };

@@ -11,9 +11,12 @@
 #include <algorithm>
 #include <cstdio>
 #include <functional>
+#include <limits>
 #include <optional>
+#include <string>
 #include <vector>
 
+#include "core/errors.h"
 #include "optics/acquisition.h"
 #include "optics/light_sheet.h"
 #include "optics/scattered_emission.h"
@@ -370,6 +373,37 @@ TEST(AdaptiveSampling, TracesMoreFieldPhotonsWhereTheFieldMissesTheTarget) {
     EXPECT_LE(adaptive.fieldPhotons, 16 * fixed.fieldPhotons);
     EXPECT_LT(fieldVariance(adaptive), 0.25 * fieldVariance(fixed));
     expectSameImageSum(fixed, adaptive);
+}
+
+// The options this session added refuse bad values by name and value: the photons' share toward the objective
+// (in [0, 1): at 1 no photon could leave elsewhere, and the estimate would lose that light), the field's diffuse
+// node spacing (>= 0, finite) in the acquisition's options and in the field's box.
+TEST(ScatteredEmission, BadShareAndDiffuseSpacingAreRefusedByName) {
+    auto expectRefused = [](const std::function<void()>& validate, const std::vector<std::string>& parts) {
+        try {
+            validate();
+            ADD_FAILURE() << "accepted: " << parts.back();
+        } catch (const ConfigError& e) {
+            for (const std::string& part : parts) EXPECT_NE(std::string(e.what()).find(part), std::string::npos) << e.what();
+        }
+    };
+    for (double share : {1.0, -0.1, std::nan("")}) {
+        optics::ScatteredEmissionOptions o;
+        o.towardObjective = share;
+        expectRefused([&] { o.validate(); }, {"toward the objective", std::to_string(share)});
+    }
+    for (double spacing : {-2.0, std::numeric_limits<double>::infinity()}) {
+        optics::ExcitationFieldOptions o;
+        o.diffuseUm = spacing;
+        expectRefused([&] { o.validate(); }, {"diffuse spacing", std::to_string(spacing)});
+        FieldBox box;
+        box.halfX = box.halfY = box.halfZ = 0.01;
+        box.diffuseH = spacing * 1e-3;
+        expectRefused([&] { box.validate(); }, {"diffuse node spacing"});
+    }
+    optics::ExcitationFieldOptions none;
+    none.diffuseUm = 0;  // no diffuse grid
+    EXPECT_NO_THROW(none.validate());
 }
 
 // Pooling two traces: each slot the photon-weighted mean of the two traces' slots, the variance from them.
