@@ -378,6 +378,115 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
     std::vector<double> largestInPixel(r.electrons.size(), 0.0);  // largest per-pixel path sample
     int rowsDone = 0;
     std::mutex progressMutex;  // the callback is called from one thread at a time
+    // A sample's electrons, the parts of them pooled at each level, and by label.
+    struct Sample {
+        double total = 0;
+        std::array<double, kImageLevels> pooled{};
+        std::vector<std::pair<uint32_t, double>> labelled;  // (key × kImageLevels + level, electrons)
+    };
+    auto samplePath = [&](int x, int y, uint64_t s, PathStats& stats, uint64_t& nonFinite) {
+        const size_t pixel = static_cast<size_t>(y) * static_cast<size_t>(width) + static_cast<size_t>(x);
+        Rng rng = Rng::forKey(o.seed, streamKey + pixel, s);
+        const SampledWavelengths wl = wavelengths.sample(rng.uniform(), rng.uniform());
+        const Vec3 point = imaging.pixelPoint(x, y, rng.uniform(), rng.uniform());
+        // The focal point moves by a sample of the in-focus PSF at the hero wavelength. Its density
+        // ratios p_j/p_0 and throughputs f_j/p_0 start the path, so the tracer's spectral MIS weighs
+        // the displacement together with the rest of the path.
+        PathStart pathStart;
+        double radius = 0;
+        const Vec3 focal = point + imaging.displacement(rng.uniform(), rng.uniform(), wl.lambda[0], &radius);
+        if (!wl.discrete) {
+            const double hero = psf.displacementDensity(radius, wl.lambda[0]);
+            for (int j = 1; j < kNumWavelengths; ++j) pathStart.r_u[j] = psf.displacementDensity(radius, wl.lambda[j]) / hero;
+            pathStart.beta = pathStart.r_u;
+        }
+        const PathImaging pathImaging(imaging, model, emissionPoints.get(), point, o.poolingFraction, emissionTraced ? &traced : nullptr);
+        pathStart.imaging = &pathImaging;
+        pathStart.labels = o.labels;
+        pathStart.field = field.get();
+        pathStart.computedEmissionTraced = emissionTraced;
+        const double uPhi = rng.uniform();  // drawn in the order the streams have always used
+        const double uCos = rng.uniform();
+        const Imaging::CameraStart cameraStart = imaging.cameraStart(scene, bends, focal, uCos, uPhi, wl);
+        const double cosT = cameraStart.cosTheta;
+        pathStart.beta *= cameraStart.weight;
+        pathStart.tMin = cameraStart.tMin;
+        const PathRadiance radiance = tracer.radiance(cameraStart.ray, cameraStart.medium, wl, rng, stats, pathStart);
+        auto electrons = [&](const SampledSpectrum& L) {
+            double e = 0;
+            for (int j = 0; j < kNumWavelengths; ++j)
+                if (L[j] != 0 && wl.pdf[j] != 0) e += L[j] / wl.pdf[j] * detection(wl.lambda[j]);
+            return e * cosT * imaging.sampleEtendue() / kNumWavelengths;
+        };
+        Sample out;
+        out.total = electrons(radiance.total());
+        for (int k = 1; k < kImageLevels; ++k)
+            if (radiance.pooled[static_cast<size_t>(k)]) out.pooled[static_cast<size_t>(k)] = electrons(radiance.pooled[static_cast<size_t>(k)]);
+        for (const PathRadiance::Labelled& l : radiance.labelled)
+            out.labelled.push_back({l.key * kImageLevels + static_cast<uint32_t>(std::clamp(l.level, 0, kImageLevels - 1)), electrons(l.radiance)});
+        bool finite = std::isfinite(out.total);
+        for (double e : out.pooled) finite = finite && std::isfinite(e);
+        for (const auto& l : out.labelled) finite = finite && std::isfinite(l.second);
+        if (!finite) {
+            ++nonFinite;
+            return Sample{};
+        }
+        return out;
+    };
+    // The paths a pixel's pilots ask for: as many as bring its standard error to the target.
+    auto pathsWanted = [&](const PixelTally& pilot, size_t pixel) {
+        const double signal = std::max(0.0, pilot.mean() + computed[pixel]);
+        const double target = sqr(*o.noiseRatio) * (signal + darkElectrons + sqr(detector.readNoiseElectrons));
+        return std::ceil(pilot.varianceOfMean() * pilot.n / target);
+    };
+    // Adaptive sampling: first the pilots of a lattice of every kPilotStride-th pixel across and down; the
+    // other pixels draw pilots only in the lattice's cells that have a corner whose pilots ask for more than
+    // spp. Where the field and the traced photons carry the scattered light the paths hold little of the
+    // noise, and pilots in every pixel cost several times the paths they decide on (docs/performance.md,
+    // "Pilots on a lattice"). Not at one path per pixel: a pixel's one path says nothing of its spread, its
+    // pilots are all there is.
+    constexpr int kPilotStride = 4;
+    const bool latticeFirst = o.noiseRatio && o.spp >= 2;
+    const int latticeWidth = (width + kPilotStride - 1) / kPilotStride, latticeHeight = (height + kPilotStride - 1) / kPilotStride;
+    std::vector<PixelTally> latticePilots;
+    std::vector<uint8_t> latticeAsks;  // whether a lattice pixel's first pilots ask for more than spp
+    if (latticeFirst) {
+        latticePilots.resize(static_cast<size_t>(latticeWidth) * static_cast<size_t>(latticeHeight));
+        latticeAsks.assign(latticePilots.size(), 0);
+        std::vector<RowTotals> latticeRows(static_cast<size_t>(latticeHeight));
+        parallelFor(latticeRows.size(), o.threads, [&](size_t j) {
+            if (o.cancel && o.cancel->load()) return;
+            const auto t0 = std::chrono::steady_clock::now();
+            RowTotals& row = latticeRows[j];
+            const int y = static_cast<int>(j) * kPilotStride;
+            for (int i = 0; i < latticeWidth; ++i) {
+                const int x = i * kPilotStride;
+                const size_t at = j * static_cast<size_t>(latticeWidth) + static_cast<size_t>(i);
+                for (int d = 0; d < o.firstPilotSpp; ++d)
+                    latticePilots[at].add(samplePath(x, y, kPilotSample + static_cast<uint64_t>(d), row.stats, row.nonFinite).total);
+                latticeAsks[at] = pathsWanted(latticePilots[at], static_cast<size_t>(y) * static_cast<size_t>(width) + static_cast<size_t>(x)) > o.spp;
+            }
+            row.pathSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        });
+        for (const RowTotals& row : latticeRows) {
+            r.stats.add(row.stats);
+            r.nonFiniteSamples += row.nonFinite;
+            r.pathSeconds += row.pathSeconds;
+        }
+        r.pilotSamples += latticePilots.size() * static_cast<uint64_t>(o.firstPilotSpp);
+        r.pilotsOnLatticeOnly = std::none_of(latticeAsks.begin(), latticeAsks.end(), [](uint8_t a) { return a != 0; });
+    }
+    // Whether a pixel draws pilots of its own: a corner of its lattice cell asks for more paths.
+    auto pilotsAt = [&](int x, int y) {
+        if (!latticeFirst) return o.noiseRatio.has_value();
+        const int lx = x / kPilotStride, ly = y / kPilotStride;
+        for (int dy = 0; dy <= 1; ++dy)
+            for (int dx = 0; dx <= 1; ++dx)
+                if (latticeAsks[static_cast<size_t>(std::min(ly + dy, latticeHeight - 1)) * static_cast<size_t>(latticeWidth) +
+                                static_cast<size_t>(std::min(lx + dx, latticeWidth - 1))])
+                    return true;
+        return false;
+    };
     parallelFor(static_cast<size_t>(height), o.threads, [&](size_t yRow) {
         if (o.cancel && o.cancel->load()) return;
         const int y = static_cast<int>(yRow);
@@ -387,78 +496,24 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
             PixelTally paths;
             double largest = 0, largestOwn = 0;
             const auto t0 = std::chrono::steady_clock::now();
-            // A sample's electrons, the parts of them pooled at each level, and by label.
-            struct Sample {
-                double total = 0;
-                std::array<double, kImageLevels> pooled{};
-                std::vector<std::pair<uint32_t, double>> labelled;  // (key × kImageLevels + level, electrons)
-            };
-            auto pathSample = [&](uint64_t s) {
-                Rng rng = Rng::forKey(o.seed, streamKey + pixel, s);
-                const SampledWavelengths wl = wavelengths.sample(rng.uniform(), rng.uniform());
-                const Vec3 point = imaging.pixelPoint(x, y, rng.uniform(), rng.uniform());
-                // The focal point moves by a sample of the in-focus PSF at the hero wavelength. Its density
-                // ratios p_j/p_0 and throughputs f_j/p_0 start the path, so the tracer's spectral MIS weighs
-                // the displacement together with the rest of the path.
-                PathStart pathStart;
-                double radius = 0;
-                const Vec3 focal = point + imaging.displacement(rng.uniform(), rng.uniform(), wl.lambda[0], &radius);
-                if (!wl.discrete) {
-                    const double hero = psf.displacementDensity(radius, wl.lambda[0]);
-                    for (int j = 1; j < kNumWavelengths; ++j) pathStart.r_u[j] = psf.displacementDensity(radius, wl.lambda[j]) / hero;
-                    pathStart.beta = pathStart.r_u;
-                }
-                const PathImaging pathImaging(imaging, model, emissionPoints.get(), point, o.poolingFraction, emissionTraced ? &traced : nullptr);
-                pathStart.imaging = &pathImaging;
-                pathStart.labels = o.labels;
-                pathStart.field = field.get();
-                pathStart.computedEmissionTraced = emissionTraced;
-                const double uPhi = rng.uniform();  // drawn in the order the streams have always used
-                const double uCos = rng.uniform();
-                const Imaging::CameraStart cameraStart = imaging.cameraStart(scene, bends, focal, uCos, uPhi, wl);
-                const double cosT = cameraStart.cosTheta;
-                pathStart.beta *= cameraStart.weight;
-                pathStart.tMin = cameraStart.tMin;
-                const PathRadiance radiance = tracer.radiance(cameraStart.ray, cameraStart.medium, wl, rng, row.stats, pathStart);
-                auto electrons = [&](const SampledSpectrum& L) {
-                    double e = 0;
-                    for (int j = 0; j < kNumWavelengths; ++j)
-                        if (L[j] != 0 && wl.pdf[j] != 0) e += L[j] / wl.pdf[j] * detection(wl.lambda[j]);
-                    return e * cosT * imaging.sampleEtendue() / kNumWavelengths;
-                };
-                Sample out;
-                out.total = electrons(radiance.total());
-                for (int k = 1; k < kImageLevels; ++k)
-                    if (radiance.pooled[static_cast<size_t>(k)]) out.pooled[static_cast<size_t>(k)] = electrons(radiance.pooled[static_cast<size_t>(k)]);
-                for (const PathRadiance::Labelled& l : radiance.labelled)
-                    out.labelled.push_back({l.key * kImageLevels + static_cast<uint32_t>(std::clamp(l.level, 0, kImageLevels - 1)), electrons(l.radiance)});
-                bool finite = std::isfinite(out.total);
-                for (double e : out.pooled) finite = finite && std::isfinite(e);
-                for (const auto& l : out.labelled) finite = finite && std::isfinite(l.second);
-                if (!finite) {
-                    ++row.nonFinite;
-                    return Sample{};
-                }
-                return out;
-            };
+            auto pathSample = [&](uint64_t s) { return samplePath(x, y, s, row.stats, row.nonFinite); };
             int n = o.spp;
-            if (o.noiseRatio) {
-                // Pilot paths from streams the estimate never uses decide how many to trace: the first few, and
-                // the rest of them where those ask for more than spp.
-                PixelTally pilot;
-                int drawn = 0;
+            if (pilotsAt(x, y)) {
+                // Pilot paths from streams the estimate never uses decide how many to trace: the first few (a
+                // lattice pixel's are drawn), and the rest of them where those ask for more than spp.
+                const bool onLattice = latticeFirst && x % kPilotStride == 0 && y % kPilotStride == 0;
+                PixelTally pilot = onLattice ? latticePilots[static_cast<size_t>(y / kPilotStride) * static_cast<size_t>(latticeWidth) +
+                                                             static_cast<size_t>(x / kPilotStride)]
+                                             : PixelTally{};
+                int drawn = onLattice ? o.firstPilotSpp : 0;
+                const int alreadyDrawn = drawn;
                 auto drawPilots = [&](int upTo) {
                     for (; drawn < upTo; ++drawn) pilot.add(pathSample(kPilotSample + static_cast<uint64_t>(drawn)).total);
                 };
-                auto wanted = [&] {
-                    const double signal = std::max(0.0, pilot.mean() + computed[pixel]);
-                    const double target = sqr(*o.noiseRatio) * (signal + darkElectrons + sqr(detector.readNoiseElectrons));
-                    return std::ceil(pilot.varianceOfMean() * pilot.n / target);
-                };
                 drawPilots(o.firstPilotSpp);
-                if (wanted() > o.spp) drawPilots(o.pilotSpp);
-                n = static_cast<int>(std::clamp(wanted(), double(o.spp), double(o.maxSpp)));
-                row.pilots += static_cast<uint64_t>(drawn);
+                if (pathsWanted(pilot, pixel) > o.spp) drawPilots(o.pilotSpp);
+                n = static_cast<int>(std::clamp(pathsWanted(pilot, pixel), double(o.spp), double(o.maxSpp)));
+                row.pilots += static_cast<uint64_t>(drawn - alreadyDrawn);
             }
             std::array<PixelTally, kImageLevels> pooled;
             for (int s = 0; s < n; ++s) {

@@ -84,7 +84,10 @@ struct AcquireOptions {
     // expected signal, √(signal + dark + read²). The number is decided from separate pilot paths that the
     // estimate does not use, so the stopping rule does not bias the mean: `firstPilotSpp` of them, and
     // `pilotSpp` in all where those ask for more than spp (with the field and the traced emission the paths
-    // hold little of the noise, and 16 pilots a pixel cost eight times the paths they decided on).
+    // hold little of the noise, and 16 pilots a pixel cost eight times the paths they decided on). A lattice
+    // of every fourth pixel draws its first pilots before the rest; the other pixels draw pilots only in the
+    // lattice's cells with a corner that asks for more than spp (the rest trace spp). Not at spp 1, where a
+    // pixel's own path says nothing of its spread.
     std::optional<double> noiseRatio;
     int maxSpp = 4096;
     int firstPilotSpp = 4, pilotSpp = 16;
@@ -136,6 +139,9 @@ struct PlaneImage {
     std::vector<std::vector<double>> labelledElectrons;  // with AcquireOptions::labels: per key, the paths' re-emissions per pixel
     // Paths traced for the estimate and for adaptive sampling's pilots (0 without a noise target).
     uint64_t pathSamples = 0, pilotSamples = 0;
+    // Adaptive sampling found that the paths meet the target at spp on its whole pilot lattice, and drew no
+    // other pilots (AcquireOptions::noiseRatio).
+    bool pilotsOnLatticeOnly = false;
     // Heavy tails: the largest single path's electrons, the largest ratio of a pixel's largest path
     // sample to its value, and samples dropped for not being finite.
     double largestSample = 0, largestSampleOverPixel = 0;

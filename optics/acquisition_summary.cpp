@@ -73,6 +73,7 @@ std::string AcquisitionSummary::addPlane(size_t slot, int plane, const PlaneImag
     emissionSum_ += image.emissionElectrons;
     pathSamples_ += image.pathSamples;
     pilotSamples_ += image.pilotSamples;
+    if (image.pilotsOnLatticeOnly) ++pilotsOnLatticeOnlyPlanes_;
     pixels_ += image.electrons.size();
     if (image.electrons.empty()) return "";
     std::vector<double> sorted = image.electrons;
@@ -171,6 +172,8 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
         {"", "median_mc_over_camera_variance_top10", median(mcOverCamera_)},
         {"", "mean_path_spp", double(pathSamples_) / std::max<double>(1.0, double(pixels_))},
         {"", "pilot_paths", double(pilotSamples_), false, true},
+        // Planes (per channel) whose pilot lattice found the paths at the target with spp, so that no other pixel drew pilots.
+        {"", "pilots_on_lattice_only_planes", double(pilotsOnLatticeOnlyPlanes_), !options_.noiseRatio, true},
         {"", "ranks", double(ranks), false, true},
         {"", "seconds", seconds_},
         {"", "paths", double(stats_.paths), false, true},

@@ -50,6 +50,7 @@ private:
     std::vector<double> pathRel_;       // relative standard errors over the brightest pixels
     std::vector<double> mcOverCamera_;  // Monte Carlo variance over the camera's noise variance, brightest pixels
     uint64_t pathSamples_ = 0, pilotSamples_ = 0, pixels_ = 0, computedPoints_ = 0, nonFinite_ = 0;
+    uint64_t pilotsOnLatticeOnlyPlanes_ = 0;
     double computedDropped_ = 0;
     UnscatteredTimings computedTimings_;  // summed over planes
     // The excitation field: photons, seconds, the electrons its scattered light excites (its noise is the

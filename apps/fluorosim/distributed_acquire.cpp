@@ -22,7 +22,7 @@ int taskPlane(uint64_t task) { return static_cast<int>(task & 0xffffffffu); }
 // single process would.
 struct PlaneHeader {
     int32_t width, height;
-    uint8_t complete;
+    uint8_t complete, pilotsOnLatticeOnly;
     double seconds, largestSample, largestSampleOverPixel;
     double computedElectrons, pathElectrons, pooledElectrons, computedSeconds, pathSeconds;
     uint64_t computedPoints, pathSamples, pilotSamples, nonFiniteSamples;
@@ -35,7 +35,7 @@ constexpr size_t kPlaneArrays = 2;
 std::vector<double> optics::PlaneImage::*const kArrays[kPlaneArrays] = {&optics::PlaneImage::electrons, &optics::PlaneImage::stderrElectrons};
 
 std::string encodePlane(const optics::PlaneImage& image) {
-    const PlaneHeader h{image.width,          image.height,        image.complete,         image.seconds,
+    const PlaneHeader h{image.width,          image.height,        image.complete,         image.pilotsOnLatticeOnly, image.seconds,
                         image.largestSample,  image.largestSampleOverPixel,               image.computedElectrons,
                         image.pathElectrons,  image.pooledElectrons, image.computedSeconds, image.pathSeconds,   image.computedPoints,
                         image.pathSamples,    image.pilotSamples,  image.nonFiniteSamples, image.stats,       image.computedTimings};
@@ -59,6 +59,7 @@ optics::PlaneImage decodePlane(std::string_view bytes) {
     image.width = h.width;
     image.height = h.height;
     image.complete = h.complete != 0;
+    image.pilotsOnLatticeOnly = h.pilotsOnLatticeOnly != 0;
     image.seconds = h.seconds;
     image.largestSample = h.largestSample;
     image.largestSampleOverPixel = h.largestSampleOverPixel;

@@ -307,7 +307,9 @@ TEST(AdaptiveSampling, KeepsTheMeanAndSpendsPathsWhereTheNoiseIs) {
                 medianMcOverCamera(adaptive));
     EXPECT_GT(spent, 16.0);
     EXPECT_LT(spent, 1024.0);
-    // Four pilots a pixel, and sixteen where those four ask for more paths than spp.
+    // Four pilots a pixel, and sixteen where those four ask for more paths than spp (a lattice pixel's first
+    // four are drawn once, before the rest).
+    EXPECT_FALSE(adaptive.pilotsOnLatticeOnly);
     EXPECT_GT(adaptive.pilotSamples, 4 * adaptive.electrons.size());
     EXPECT_LE(adaptive.pilotSamples, 16 * adaptive.electrons.size());
     EXPECT_EQ((adaptive.pilotSamples - 4 * adaptive.electrons.size()) % 12, 0u);
@@ -321,7 +323,34 @@ TEST(AdaptiveSampling, ALooseTargetChangesNothing) {
     const optics::PlaneImage adaptive = render(scene, optics::Estimator::Split, 4, 31, 1e6);
     EXPECT_EQ(adaptive.electrons, fixed.electrons);
     EXPECT_EQ(adaptive.pathSamples, fixed.pathSamples);
-    EXPECT_EQ(adaptive.pilotSamples, 4 * adaptive.electrons.size()) << "the first four pilots settle every pixel";
+    // Every fourth pixel across and down draws four pilots; they ask for no more paths, so no other pixel draws any.
+    EXPECT_TRUE(adaptive.pilotsOnLatticeOnly);
+    const size_t lattice = static_cast<size_t>((adaptive.width + 3) / 4) * static_cast<size_t>((adaptive.height + 3) / 4);
+    EXPECT_EQ(adaptive.pilotSamples, 4 * lattice);
+    // At one path per pixel, whose spread says nothing, every pixel draws its four pilots.
+    const optics::PlaneImage one = render(scene, optics::Estimator::Split, 1, 31);
+    const optics::PlaneImage oneAdaptive = render(scene, optics::Estimator::Split, 1, 31, 1e6);
+    EXPECT_EQ(oneAdaptive.electrons, one.electrons);
+    EXPECT_FALSE(oneAdaptive.pilotsOnLatticeOnly);
+    EXPECT_EQ(oneAdaptive.pilotSamples, 4 * oneAdaptive.electrons.size());
+}
+
+// Between those, the lattice's pixels that ask for more paths make their cells' pixels draw pilots, and no
+// other pixel: at a target some of the lattice misses (σs 2 /mm, the split estimator's paths), fewer pilots
+// than four a pixel, more paths than spp, and the fixed count's mean.
+TEST(AdaptiveSampling, PilotsOnlyInTheLatticeCellsThatAskForMore) {
+    const Scene scene = filamentScene(2.0);
+    const optics::PlaneImage fixed = render(scene, optics::Estimator::Split, 2, 51);
+    const optics::PlaneImage adaptive = render(scene, optics::Estimator::Split, 2, 51, 0.03);
+    const size_t pixels = adaptive.electrons.size();
+    const size_t lattice = static_cast<size_t>((adaptive.width + 3) / 4) * static_cast<size_t>((adaptive.height + 3) / 4);
+    std::printf("  pilot paths %llu (lattice %zu x 4, every pixel %zu x 4), paths %llu against %llu\n", static_cast<unsigned long long>(adaptive.pilotSamples),
+                lattice, pixels, static_cast<unsigned long long>(adaptive.pathSamples), static_cast<unsigned long long>(fixed.pathSamples));
+    EXPECT_FALSE(adaptive.pilotsOnLatticeOnly);
+    EXPECT_GT(adaptive.pilotSamples, 4 * lattice);
+    EXPECT_LT(adaptive.pilotSamples, 4 * pixels);
+    EXPECT_GT(adaptive.pathSamples, fixed.pathSamples);
+    expectSameImageSum(fixed, adaptive);
 }
 
 // The traced scattered emission's photon count adapts too: a target its slots' variance misses over the
