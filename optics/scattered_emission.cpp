@@ -28,7 +28,12 @@ constexpr int kSlots = 16;
 constexpr double kUniformShare = 0.05;
 // A weight window on the photons, by the importance of where they scatter: 1 where their light reaches the
 // image near focus; kFarDepth / |dz| beyond kFarDepth from the focal plane, where a vertex's light is a disc
-// wider than 2 × kFarDepth × tan θ, smooth over many pixels; and where no light they send the objective can
+// wider than 2 × kFarDepth × tan θ, smooth over many pixels, times e^{τ(0) - τ(dz)} (τ the scattering
+// optical depth above a height dz along the axis: the light a vertex sends the objective unscattered,
+// against the focus's), at most 1 (no photon is split for going where it matters more than at its source,
+// but none is rouletted where it matters as much: in uncleared cortex the vertices 5-20 µm under the surface,
+// 230 µm above focus, send the objective a hundred times the focus's light, and rouletted at 20/230 their
+// survivors set the image's level, docs/performance.md); and where no light they send the objective can
 // reach the image, kInvisible / (1 + d / kFarDepth) at d beyond the part that can (they may come back, the
 // more seldom the farther). A photon whose power is over 2× or under ½× its unit power over the importance
 // (its power at its source times the importance there) goes on as that many copies at it (Russian roulette
@@ -63,28 +68,46 @@ WavelengthSampler emissionWavelengths(const Scene& scene, const std::function<do
     return sampler;
 }
 
-// The scattering optical depth from the focus toward the objective along the axis, up to the working distance,
-// at the detection-weighted mean wavelength (each medium at its scattering channel's largest value).
-double scatteringDepthToObjective(const Scene& scene, const Imaging& imaging, const std::function<double(double)>& detection) {
-    double sum = 0, weighted = 0;
-    for (double l = scene.spectral.lambdaMin + 0.5; l < scene.spectral.lambdaMax; l += 1) {
-        const double d = std::max(0.0, detection(l));
-        sum += d;
-        weighted += d * l;
-    }
-    if (!(sum > 0)) return 0;
-    const double lambda = weighted / sum;
-    const Ray up{imaging.centre(), imaging.axis()};
-    const StraightLine line = traceStraightLine(scene, up, mediumAt(scene, imaging.centre(), imaging.axis()), 0.0, imaging.workingDistanceMm(),
-                                                LineSurfaces::UntilRefraction);
-    double tau = 0;
-    for (const RaySegment& seg : line.segments)
-        if (seg.medium != kNone) {
-            const Medium& m = scene.media[static_cast<size_t>(seg.medium)];
-            if (!m.isVacuumLike()) tau += m.scatteringAt(lambda) * m.channelMax()[kScatteringChannel] * (seg.t1 - seg.t0);
+// The scattering optical depth along the axis through the image's centre, from a height dz above the focal
+// plane up to the objective's front, at the detection-weighted mean wavelength (each medium at its scattering
+// channel's largest value): the light a vertex there sends the objective unscattered, if the tissue is
+// layered across the axis.
+class AxisScattering {
+public:
+    AxisScattering(const Scene& scene, const Imaging& imaging, const std::function<double(double)>& detection) : front_(imaging.workingDistanceMm()) {
+        double sum = 0, weighted = 0;
+        for (double l = scene.spectral.lambdaMin + 0.5; l < scene.spectral.lambdaMax; l += 1) {
+            const double d = std::max(0.0, detection(l));
+            sum += d;
+            weighted += d * l;
         }
-    return tau;
-}
+        if (!(sum > 0)) return;
+        const double lambda = weighted / sum;
+        // From below the whole scene up to the front.
+        const double below = 2 * (scene.geometry.extent() + length(imaging.centre())) + 1;
+        const Vec3 bottom = imaging.centre() - imaging.axis() * below;
+        const StraightLine line = traceStraightLine(scene, Ray{bottom, imaging.axis()}, mediumAt(scene, bottom, imaging.axis()), 0.0,
+                                                    below + front_, LineSurfaces::ThroughAll);
+        for (const RaySegment& seg : line.segments)
+            if (seg.medium != kNone) {
+                const Medium& m = scene.media[static_cast<size_t>(seg.medium)];
+                const double sigma = m.isVacuumLike() ? 0.0 : m.scatteringAt(lambda) * m.channelMax()[kScatteringChannel];
+                if (sigma > 0) layers_.push_back({seg.t0 - below, seg.t1 - below, sigma});
+            }
+    }
+    double depthAbove(double dz) const {
+        double tau = 0;
+        for (const Layer& l : layers_) tau += l.sigma * std::max(0.0, std::min(l.s1, front_) - std::max(l.s0, dz));
+        return tau;
+    }
+
+private:
+    struct Layer {
+        double s0, s1, sigma;  // along the axis from the focal plane (mm), and the scattering coefficient (/mm)
+    };
+    double front_;
+    std::vector<Layer> layers_;
+};
 
 // The dye in the excitation field's box, in media whose every dye lies in grids: the index cells of the
 // grids (between voxel centres, where trilinear look-ups interpolate one set of eight voxels) whose corners
@@ -314,7 +337,8 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
     // at the detected light's mean wavelength. Where τ is large the detected light has scattered many times and
     // forgotten where it left for: in uncleared cortex (τ 5) the cone tripled the traced part's noise.
     const double cosLeave = std::cos(std::min(std::acos(cosMax) + kPi / 12, kPi / 2)), leaveSolidAngle = 2 * kPi * (1 - cosLeave);
-    const double towardObjective = options.towardObjective * std::exp(-scatteringDepthToObjective(scene, imaging, detection));
+    const AxisScattering axisScattering(scene, imaging, detection);
+    const double towardObjective = options.towardObjective * std::exp(-axisScattering.depthAbove(0));
     const uint64_t key = mixBits(streamKey + 0x656d697373696f6eULL);
 
     // Per slot and image level, the sum of the deposits on each pixel (levels allocated when first used).
@@ -361,9 +385,12 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
         double specularSurvival(const Photon&) override { return ++specularEvents > 8 ? 0.95 : 1.0; }
         // The walking photon's power at importance 1: at its source it lies inside its window.
         double unitPower = 0;
+        const AxisScattering* axisScattering = nullptr;
+        double focusDepth = 0;  // axisScattering's optical depth above the focal plane
         double importance(const Imaging::Local& l) const {
             const double dz = std::abs(l.dz);
-            const double depth = dz > kFarDepthMm ? kFarDepthMm / dz : 1.0;
+            const double depth =
+                std::min(1.0, (dz > kFarDepthMm ? kFarDepthMm / dz : 1.0) * std::exp(focusDepth - axisScattering->depthAbove(l.dz)));
             const double beyond = beyondVisible(l);
             return beyond > 0 ? depth * kInvisible / (1 + beyond / kFarDepthMm) : depth;
         }
@@ -489,6 +516,8 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
         Projector projector(scene, tracer, imaging, covered, psf, detection, axis, cosMax, cone, exposureS, options.directions);
         projector.slot = &slot;
         projector.margin = psf.cutRadiusMm(scene.spectral.lambdaMax) + 2 * imaging.pixelMm();
+        projector.axisScattering = &axisScattering;
+        projector.focusDepth = axisScattering.depthAbove(0);
         // Photons leave each source point kPhotonsPerPoint at a time: the point's excitation (a beam
         // transmittance traced back to where the beam entered) is the costliest part of a photon.
         const std::vector<double>& lines = tracer.lineWavelengths();
