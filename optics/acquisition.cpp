@@ -448,6 +448,7 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
     constexpr int kPilotStride = 4;
     const bool latticeFirst = o.noiseRatio && o.spp >= 2;
     const int latticeWidth = (width + kPilotStride - 1) / kPilotStride, latticeHeight = (height + kPilotStride - 1) / kPilotStride;
+    auto latticeIndex = [&](int lx, int ly) { return static_cast<size_t>(ly) * static_cast<size_t>(latticeWidth) + static_cast<size_t>(lx); };
     std::vector<PixelTally> latticePilots;
     std::vector<uint8_t> latticeAsks;  // whether a lattice pixel's first pilots ask for more than spp
     if (latticeFirst) {
@@ -461,7 +462,7 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
             const int y = static_cast<int>(j) * kPilotStride;
             for (int i = 0; i < latticeWidth; ++i) {
                 const int x = i * kPilotStride;
-                const size_t at = j * static_cast<size_t>(latticeWidth) + static_cast<size_t>(i);
+                const size_t at = latticeIndex(i, static_cast<int>(j));
                 for (int d = 0; d < o.firstPilotSpp; ++d)
                     latticePilots[at].add(samplePath(x, y, kPilotSample + static_cast<uint64_t>(d), row.stats, row.nonFinite).total);
                 latticeAsks[at] = pathsWanted(latticePilots[at], static_cast<size_t>(y) * static_cast<size_t>(width) + static_cast<size_t>(x)) > o.spp;
@@ -482,9 +483,7 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         const int lx = x / kPilotStride, ly = y / kPilotStride;
         for (int dy = 0; dy <= 1; ++dy)
             for (int dx = 0; dx <= 1; ++dx)
-                if (latticeAsks[static_cast<size_t>(std::min(ly + dy, latticeHeight - 1)) * static_cast<size_t>(latticeWidth) +
-                                static_cast<size_t>(std::min(lx + dx, latticeWidth - 1))])
-                    return true;
+                if (latticeAsks[latticeIndex(std::min(lx + dx, latticeWidth - 1), std::min(ly + dy, latticeHeight - 1))]) return true;
         return false;
     };
     parallelFor(static_cast<size_t>(height), o.threads, [&](size_t yRow) {
@@ -502,9 +501,7 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                 // Pilot paths from streams the estimate never uses decide how many to trace: the first few (a
                 // lattice pixel's are drawn), and the rest of them where those ask for more than spp.
                 const bool onLattice = latticeFirst && x % kPilotStride == 0 && y % kPilotStride == 0;
-                PixelTally pilot = onLattice ? latticePilots[static_cast<size_t>(y / kPilotStride) * static_cast<size_t>(latticeWidth) +
-                                                             static_cast<size_t>(x / kPilotStride)]
-                                             : PixelTally{};
+                PixelTally pilot = onLattice ? latticePilots[latticeIndex(x / kPilotStride, y / kPilotStride)] : PixelTally{};
                 int drawn = onLattice ? o.firstPilotSpp : 0;
                 const int alreadyDrawn = drawn;
                 auto drawPilots = [&](int upTo) {

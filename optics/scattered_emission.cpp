@@ -100,6 +100,8 @@ public:
         for (const Layer& l : layers_) tau += l.sigma * std::max(0.0, std::min(l.s1, front_) - std::max(l.s0, dz));
         return tau;
     }
+    // The light a vertex at dz sends the objective unscattered over a vertex's at the focus: e^{τ(0) - τ(dz)}.
+    double overFocus(double dz) const { return std::exp(depthAbove(0) - depthAbove(dz)); }
 
 private:
     struct Layer {
@@ -386,11 +388,10 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
         // The walking photon's power at importance 1: at its source it lies inside its window.
         double unitPower = 0;
         const AxisScattering* axisScattering = nullptr;
-        double focusDepth = 0;  // axisScattering's optical depth above the focal plane
         double importance(const Imaging::Local& l) const {
             const double dz = std::abs(l.dz);
             const double depth =
-                std::min(1.0, (dz > kFarDepthMm ? kFarDepthMm / dz : 1.0) * std::exp(focusDepth - axisScattering->depthAbove(l.dz)));
+                std::min(1.0, (dz > kFarDepthMm ? kFarDepthMm / dz : 1.0) * axisScattering->overFocus(l.dz));
             const double beyond = beyondVisible(l);
             return beyond > 0 ? depth * kInvisible / (1 + beyond / kFarDepthMm) : depth;
         }
@@ -517,7 +518,6 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
         projector.slot = &slot;
         projector.margin = psf.cutRadiusMm(scene.spectral.lambdaMax) + 2 * imaging.pixelMm();
         projector.axisScattering = &axisScattering;
-        projector.focusDepth = axisScattering.depthAbove(0);
         // Photons leave each source point kPhotonsPerPoint at a time: the point's excitation (a beam
         // transmittance traced back to where the beam entered) is the costliest part of a photon.
         const std::vector<double>& lines = tracer.lineWavelengths();
