@@ -248,30 +248,12 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         }
         return fieldComplete() && makeComputed();
     };
-    // The field's photons per line side so far, against kMostFieldFactor times the first count.
-    auto fieldPhotonsLeft = [&] { return kMostFieldFactor * double(o.field.photons) / double(field->fields().front().stats.photons); };
     const double brightest = std::min(0.99, 1.0 - 64.0 / double(r.electrons.size()));  // the brightest 1 %, at least 64 pixels
     if (model) {
         field = traceExcitationField(scene, tracer, imaging, *model, o, streamKey);
         if (!fieldComplete() || !makeComputed()) {
             r.complete = false;
             return r;
-        }
-        // Adaptive sampling: more field photons, in one further trace from other streams pooled with the first,
-        // until the field's median variance in the computed image over the brightest 1 % (where the neurites
-        // are, and where its noise is; at least 64 pixels) is at most half the target's, at most
-        // kMostFieldFactor times the first count; the computed image is then made again with the pooled field.
-        // Its noise in the traced photons' sources is weighed after them (below).
-        if (o.noiseRatio && field && !r.fieldHalfDifference.empty()) {
-            std::vector<double> variance(r.fieldHalfDifference.size());
-            for (size_t i = 0; i < variance.size(); ++i) variance[i] = sqr(r.fieldHalfDifference[i]);
-            const uint64_t photons =
-                adaptiveExtraPhotons(medianVarianceOverCamera(variance, computed, brightest, darkElectrons, detector.readNoiseElectrons), *o.noiseRatio,
-                                     kMostFieldFactor, o.field.photons);
-            if (photons > 0 && !poolMoreField(photons, kAdaptiveStreams)) {
-                r.complete = false;
-                return r;
-            }
         }
     }
     const bool bends = hasRefractingSurfaces(scene);
@@ -290,53 +272,69 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                                 scattersEmission && tracer.fluorescence().model() == FluorescenceModel::Full && !o.labels;
     if (emissionTraced) {
         std::optional<PathImaging> covered;
-        double discardedSeconds = 0;  // a pass traced again with more field is time spent all the same
-        auto traceEmission = [&] {
-            discardedSeconds += traced.seconds;
+        double discardedSeconds = 0;  // a pilot traced before more field is time spent all the same
+        // `photons` of the plane's photons, from the streams `streams` apart from the first's (false: cancelled).
+        auto traceEmission = [&](uint64_t photons, uint64_t streams, ScatteredEmissionImage& into) {
             covered.emplace(imaging, model, emissionPoints.get(), imaging.centre(), o.poolingFraction);
-            traced = traceScatteredEmission(scene, tracer, imaging, *covered, *emissionPoints, field.get(), detection, detector.exposureS, o.emission,
-                                            o.seed, streamKey, o.threads, o.cancel);
-            return traced.complete;
+            ScatteredEmissionOptions count = o.emission;
+            count.photons = photons;
+            into = traceScatteredEmission(scene, tracer, imaging, *covered, *emissionPoints, field.get(), detection, detector.exposureS, count, o.seed,
+                                          streams ? mixBits(streamKey + streams) : streamKey, o.threads, o.cancel);
+            return into.complete;
         };
-        if (!traceEmission()) {
-            r.complete = false;
-            return r;
-        }
-        // Adaptive sampling: the field's noise reaches the photons' sources too, and through them the haze
-        // (docs/performance.md, "Weight windows"). Where the field's part, in the computed image and the traced
-        // one together, misses half the target's over the brightest tenth or 1 %: more field photons (within
-        // kMostFieldFactor times the first count), the computed image made again, the photons traced again
-        // with the pooled field.
-        if (o.noiseRatio && field && traced.fieldHalfDifference.size() == computed.size()) {
-            std::vector<double> variance(computed.size()), signal(computed.size());
-            for (size_t i = 0; i < variance.size(); ++i) {
-                variance[i] = sqr((r.fieldHalfDifference.empty() ? 0.0 : r.fieldHalfDifference[i]) + traced.fieldHalfDifference[i]);
-                signal[i] = computed[i] + traced.electrons[i];
-            }
-            const double ratio = std::max(medianVarianceOverCamera(variance, signal, 0.9, darkElectrons, detector.readNoiseElectrons),
-                                          medianVarianceOverCamera(variance, signal, brightest, darkElectrons, detector.readNoiseElectrons));
-            const uint64_t photons = adaptiveExtraPhotons(ratio, *o.noiseRatio, fieldPhotonsLeft(), field->fields().front().stats.photons);
-            if (photons > 0 && (!poolMoreField(photons, kAdaptiveStreams + 1) || !traceEmission())) {
+        const uint64_t first = o.emission.photonsFor(static_cast<size_t>(width) * height);
+        // Adaptive sampling: a pilot of a quarter of the photons decides the field first. The field's noise
+        // reaches the computed image and, through the photons' sources, the haze (docs/performance.md, "Weight
+        // windows"). Where the two together miss half the target's over the brightest tenth or 1 % (where the
+        // neurites are; at least 64 pixels): more field photons (within kMostFieldFactor times the first count)
+        // in one further trace pooled with the first, the computed image made again, and all the photons traced
+        // with the pooled field; else the pilot is a quarter of them.
+        const uint64_t pilot = o.noiseRatio && field ? first / 4 : 0;
+        if (pilot >= 2) {
+            if (!traceEmission(pilot, kAdaptiveStreams + 2, traced)) {
                 r.complete = false;
                 return r;
             }
+            uint64_t fieldPhotons = 0;
+            if (traced.fieldHalfDifference.size() == computed.size()) {
+                std::vector<double> variance(computed.size()), signal(computed.size());
+                for (size_t i = 0; i < variance.size(); ++i) {
+                    variance[i] = sqr((r.fieldHalfDifference.empty() ? 0.0 : r.fieldHalfDifference[i]) + traced.fieldHalfDifference[i]);
+                    signal[i] = computed[i] + traced.electrons[i];
+                }
+                const double ratio = std::max(medianVarianceOverCamera(variance, signal, 0.9, darkElectrons, detector.readNoiseElectrons),
+                                              medianVarianceOverCamera(variance, signal, brightest, darkElectrons, detector.readNoiseElectrons));
+                fieldPhotons = adaptiveExtraPhotons(ratio, *o.noiseRatio, kMostFieldFactor, o.field.photons);
+                if (fieldPhotons > 0 && !poolMoreField(fieldPhotons, kAdaptiveStreams)) {
+                    r.complete = false;
+                    return r;
+                }
+            }
+            ScatteredEmissionImage rest;
+            if (!traceEmission(fieldPhotons > 0 ? first : first - pilot, 0, rest)) {
+                r.complete = false;
+                return r;
+            }
+            if (fieldPhotons > 0) discardedSeconds += traced.seconds;
+            traced = fieldPhotons > 0 ? std::move(rest) : pooledTraces(traced, rest);
+        } else if (!traceEmission(first, 0, traced)) {
+            r.complete = false;
+            return r;
         }
         // Adaptive sampling: more photons, in one further trace from other streams, until the traced part's
-        // median variance over the brightest tenth is at most half the target's (the rest is the paths' and
-        // the field's), at most kMostTracedFactor times the first count. Its slots see only the photons' own
-        // noise, not the field's that reaches their sources (docs/performance.md).
+        // median variance over the brightest tenth and 1 % is at most half the target's (the rest is the
+        // paths' and the field's), at most kMostTracedFactor times the first count. Its slots see only the
+        // photons' own noise, not the field's that reaches their sources (docs/performance.md).
         if (o.noiseRatio && traced.photons > 0) {
             constexpr double kMostTracedFactor = 32;
             std::vector<double> signal = computed;
             for (size_t i = 0; i < signal.size(); ++i) signal[i] += traced.electrons[i];
-            ScatteredEmissionOptions more = o.emission;
-            more.photons = adaptiveExtraPhotons(medianVarianceOverCamera(traced.variance, signal, 0.9, darkElectrons, detector.readNoiseElectrons),
-                                                *o.noiseRatio, kMostTracedFactor, traced.photons);
-            if (*more.photons > 0) {
-                const ScatteredEmissionImage extra = traceScatteredEmission(scene, tracer, imaging, *covered, *emissionPoints, field.get(), detection,
-                                                                            detector.exposureS, more, o.seed, mixBits(streamKey + kAdaptiveStreams),
-                                                                            o.threads, o.cancel);
-                if (!extra.complete) {
+            const double ratio = std::max(medianVarianceOverCamera(traced.variance, signal, 0.9, darkElectrons, detector.readNoiseElectrons),
+                                          medianVarianceOverCamera(traced.variance, signal, brightest, darkElectrons, detector.readNoiseElectrons));
+            const uint64_t photons = adaptiveExtraPhotons(ratio, *o.noiseRatio, kMostTracedFactor, traced.photons);
+            if (photons > 0) {
+                ScatteredEmissionImage extra;
+                if (!traceEmission(photons, kAdaptiveStreams, extra)) {
                     r.complete = false;
                     return r;
                 }

@@ -26,21 +26,20 @@ namespace {
 constexpr int kSlots = 16;
 // Share of the wavelength proposal spread uniformly, so that its density is positive wherever a dye emits.
 constexpr double kUniformShare = 0.05;
-// A weight window on the photons, by the importance of where they scatter: 1 where their light reaches the
-// image near focus; kFarDepth / |dz| beyond kFarDepth from the focal plane, where a vertex's light is a disc
-// wider than 2 × kFarDepth × tan θ, smooth over many pixels, times e^{τ(0) - τ(dz)} (τ the scattering
-// optical depth above a height dz along the axis: the light a vertex sends the objective unscattered,
-// against the focus's), at most 1 (no photon is split for going where it matters more than at its source,
-// but none is rouletted where it matters as much: in uncleared cortex the vertices 5-20 µm under the surface,
-// 230 µm above focus, send the objective a hundred times the focus's light, and rouletted at 20/230 their
-// survivors set the image's level, docs/performance.md); and where no light they send the objective can
-// reach the image, kInvisible / (1 + d / kFarDepth) at d beyond the part that can (they may come back, the
-// more seldom the farther). A photon whose power is over 2× or under ½× its unit power over the importance
-// (its power at its source times the importance there) goes on as that many copies at it (Russian roulette
-// below, splitting above): a photon that roams where it is unseen comes back as copies of bounded power, not
-// as one whose power doubled at every unseen vertex.
+// A weight window on the photons, by the importance of where they scatter: e^{τ(0) - τ(dz)} at a height dz
+// above the focal plane (τ the scattering optical depth above it along the axis: the light a vertex sends the
+// objective unscattered, against the focus's), times kFar / |dz| beyond kFar from the focal plane, at most 1
+// (no photon is split for going where it matters more than at its source); and where no light a vertex sends
+// the objective can reach the image, kInvisible / (1 + d / kFar) times that at d beyond the part that can (it
+// may come back, the more seldom the farther). A photon whose power is over 2× or under ½× its unit power over
+// the importance (its power at its source times the importance there) goes on as that many copies at it
+// (Russian roulette below, splitting above): a photon that roams where it is unseen comes back as copies of
+// bounded power, not as one whose power doubled at every unseen vertex. kFar is 100 µm: a vertex 200 µm above
+// focus lights the whole image through its defocus disc, and rouletted from 20 µm on (the eighteenth
+// session's) its survivors set a σs 2 /mm plane's level in AF488; without any fall, photons wander unseen
+// through a large non-absorbing block (docs/performance.md, "The weight window far from focus").
 constexpr double kInvisible = 0.5;
-constexpr double kFarDepthMm = 0.02;
+constexpr double kFarMm = 0.1;
 constexpr uint64_t kPhotonsPerPoint = 4;
 
 // The photons' wavelengths: in proportion to the scene's dyes' emission times the detection, on 1 nm cells,
@@ -390,10 +389,9 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
         const AxisScattering* axisScattering = nullptr;
         double importance(const Imaging::Local& l) const {
             const double dz = std::abs(l.dz);
-            const double depth =
-                std::min(1.0, (dz > kFarDepthMm ? kFarDepthMm / dz : 1.0) * axisScattering->overFocus(l.dz));
+            const double depth = std::min(1.0, (dz > kFarMm ? kFarMm / dz : 1.0) * axisScattering->overFocus(l.dz));
             const double beyond = beyondVisible(l);
-            return beyond > 0 ? depth * kInvisible / (1 + beyond / kFarDepthMm) : depth;
+            return beyond > 0 ? depth * kInvisible / (1 + beyond / kFarMm) : depth;
         }
         double survival(const Photon& ph, const Vec3& p) override { return weightWindowSurvival(ph.weight, importance(imaging.local(p)), unitPower); }
 

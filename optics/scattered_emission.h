@@ -28,12 +28,13 @@ namespace fluorosim::optics {
 
 struct ScatteredEmissionOptions {
     // Photons per plane and channel: `photons` when set (0: the camera paths carry it), else photonsPerPixel times
-    // the plane's pixels. The default, 4 (2^18 on a 256² plane) with 4 directions per vertex, costs what 8 with one
-    // direction per pooled vertex cost and leaves less noise (docs/performance.md, "Directions per vertex").
+    // the plane's pixels. The default, 4 (2^18 on a 256² plane) with 8 directions per vertex: at σs 2 /mm a
+    // vertex's directions hold most of the photons' noise and cost a tenth of a photon each (docs/performance.md,
+    // "Directions per vertex").
     std::optional<uint64_t> photons;
     double photonsPerPixel = 4;
     uint64_t photonsFor(size_t pixels) const;
-    int directions = 4;                    // per vertex imaged, pooled or not
+    int directions = 8;                    // per vertex imaged, pooled or not
     // The share of photons that leave their source into a cone about the axis toward the objective, 15° wider
     // than the collection cone's half-angle, where the tissue above the focus is thin (times e^{-τ}, τ its
     // scattering optical depth along the axis); the rest leave uniformly, and every photon is weighed by the
