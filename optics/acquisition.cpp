@@ -248,7 +248,13 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         }
         return fieldComplete() && makeComputed();
     };
-    const double brightest = std::min(0.99, 1.0 - 64.0 / double(r.electrons.size()));  // the brightest 1 %, at least 64 pixels
+    // A part's variance over the camera's, the larger of its medians over the brightest tenth and the brightest
+    // 1 % (at least 64 pixels): where the neurites are.
+    auto overBrightest = [&](const std::vector<double>& variance, const std::vector<double>& signal) {
+        const double brightest = std::min(0.99, 1.0 - 64.0 / double(signal.size()));
+        return std::max(medianVarianceOverCamera(variance, signal, 0.9, darkElectrons, detector.readNoiseElectrons),
+                        medianVarianceOverCamera(variance, signal, brightest, darkElectrons, detector.readNoiseElectrons));
+    };
     if (model) {
         field = traceExcitationField(scene, tracer, imaging, *model, o, streamKey);
         if (!fieldComplete() || !makeComputed()) {
@@ -299,12 +305,12 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
             if (traced.fieldHalfDifference.size() == computed.size()) {
                 std::vector<double> variance(computed.size()), signal(computed.size());
                 for (size_t i = 0; i < variance.size(); ++i) {
-                    variance[i] = sqr((r.fieldHalfDifference.empty() ? 0.0 : r.fieldHalfDifference[i]) + traced.fieldHalfDifference[i]);
+                    // In the photons' units: a half difference is one degree of freedom.
+                    const double halfDifference = (r.fieldHalfDifference.empty() ? 0.0 : r.fieldHalfDifference[i]) + traced.fieldHalfDifference[i];
+                    variance[i] = sqr(halfDifference) / kMedianOfChiSquare1;
                     signal[i] = computed[i] + traced.electrons[i];
                 }
-                const double ratio = std::max(medianVarianceOverCamera(variance, signal, 0.9, darkElectrons, detector.readNoiseElectrons),
-                                              medianVarianceOverCamera(variance, signal, brightest, darkElectrons, detector.readNoiseElectrons));
-                fieldPhotons = adaptiveExtraPhotons(ratio, *o.noiseRatio, kMostFieldFactor, o.field.photons);
+                fieldPhotons = adaptiveExtraPhotons(overBrightest(variance, signal), *o.noiseRatio, kMostFieldFactor, o.field.photons);
                 if (fieldPhotons > 0 && !poolMoreField(fieldPhotons, kAdaptiveStreams)) {
                     r.complete = false;
                     return r;
@@ -329,9 +335,7 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
             constexpr double kMostTracedFactor = 32;
             std::vector<double> signal = computed;
             for (size_t i = 0; i < signal.size(); ++i) signal[i] += traced.electrons[i];
-            const double ratio = std::max(medianVarianceOverCamera(traced.variance, signal, 0.9, darkElectrons, detector.readNoiseElectrons),
-                                          medianVarianceOverCamera(traced.variance, signal, brightest, darkElectrons, detector.readNoiseElectrons));
-            const uint64_t photons = adaptiveExtraPhotons(ratio, *o.noiseRatio, kMostTracedFactor, traced.photons);
+            const uint64_t photons = adaptiveExtraPhotons(overBrightest(traced.variance, signal), *o.noiseRatio, kMostTracedFactor, traced.photons);
             if (photons > 0) {
                 ScatteredEmissionImage extra;
                 if (!traceEmission(photons, kAdaptiveStreams, extra)) {

@@ -119,6 +119,11 @@ double sampleGamma(double shape, double scale, Rng& rng);
 // Standard normal (Box-Muller, one value per call so the stream use is fixed per sample).
 double sampleStandardNormal(Rng& rng);
 
+// The median of a chi-square of one degree of freedom. A squared half difference is its pixel's variance times
+// such a chi-square, so a median over pixels reads that variance at this fraction, where slots' variance of 15
+// degrees of freedom reads nearly all of it: the adaptive mode divides the field's by it to weigh both alike.
+constexpr double kMedianOfChiSquare1 = 0.45493642;
+
 // The median, over the pixels at or above the `quantile` of `signal` (e⁻), of variance / (signal + dark +
 // read²): a Monte Carlo part's noise against the camera's, as the adaptive mode judges its field and photons.
 double medianVarianceOverCamera(const std::vector<double>& variance, const std::vector<double>& signal, double quantile, double darkElectrons,

@@ -93,6 +93,7 @@ public:
                 const double sigma = m.isVacuumLike() ? 0.0 : m.scatteringAt(lambda) * m.channelMax()[kScatteringChannel];
                 if (sigma > 0) layers_.push_back({seg.t0 - below, seg.t1 - below, sigma});
             }
+        depthAtFocus_ = depthAbove(0);
     }
     double depthAbove(double dz) const {
         double tau = 0;
@@ -100,7 +101,8 @@ public:
         return tau;
     }
     // The light a vertex at dz sends the objective unscattered over a vertex's at the focus: e^{τ(0) - τ(dz)}.
-    double overFocus(double dz) const { return std::exp(depthAbove(0) - depthAbove(dz)); }
+    double overFocus(double dz) const { return std::exp(depthAtFocus_ - depthAbove(dz)); }
+    double depthAtFocus() const { return depthAtFocus_; }
 
 private:
     struct Layer {
@@ -108,6 +110,7 @@ private:
     };
     double front_;
     std::vector<Layer> layers_;
+    double depthAtFocus_ = 0;  // τ(0), asked at every survival check
 };
 
 // The dye in the excitation field's box, in media whose every dye lies in grids: the index cells of the
@@ -339,7 +342,7 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
     // forgotten where it left for: in uncleared cortex (τ 5) the cone tripled the traced part's noise.
     const double cosLeave = std::cos(std::min(std::acos(cosMax) + kPi / 12, kPi / 2)), leaveSolidAngle = 2 * kPi * (1 - cosLeave);
     const AxisScattering axisScattering(scene, imaging, detection);
-    const double towardObjective = options.towardObjective * std::exp(-axisScattering.depthAbove(0));
+    const double towardObjective = options.towardObjective * std::exp(-axisScattering.depthAtFocus());
     const uint64_t key = mixBits(streamKey + 0x656d697373696f6eULL);
 
     // Per slot and image level, the sum of the deposits on each pixel (levels allocated when first used).

@@ -256,6 +256,9 @@ void FluenceGrid::deposit(const Vec3& a, const Vec3& b, double weight) {
         next[k] = (plane[k] - u0[k]) / du[k];
     }
     static const double kGauss = 1 / std::sqrt(3.0);
+    // A cell's eight nodes from its first, in index order (x fastest).
+    const size_t sy = static_cast<size_t>(n_[0]), sz = sy * static_cast<size_t>(n_[1]);
+    const std::array<size_t, 8> offset{0, 1, sy, sy + 1, sz, sz + 1, sz + sy, sz + sy + 1};
     for (double ta = t0;;) {
         const size_t k = next[0] <= next[1] ? (next[0] <= next[2] ? 0 : 2) : (next[1] <= next[2] ? 1 : 2);
         const double tb = std::min(next[k], t1);
@@ -269,10 +272,15 @@ void FluenceGrid::deposit(const Vec3& a, const Vec3& b, double weight) {
                 const double t = mid + g * half;
                 std::array<double, 3> f{};
                 for (size_t q = 0; q < 3; ++q) f[q] = std::clamp(u0[q] + t * du[q] - cell[q], 0.0, 1.0);
-                for (int c = 0; c < 8; ++c) corner[static_cast<size_t>(c)] += (c & 1 ? f[0] : 1 - f[0]) * (c & 2 ? f[1] : 1 - f[1]) * (c & 4 ? f[2] : 1 - f[2]);
+                const std::array<double, 4> xy{(1 - f[0]) * (1 - f[1]), f[0] * (1 - f[1]), (1 - f[0]) * f[1], f[0] * f[1]};
+                for (size_t c = 0; c < 4; ++c) {
+                    corner[c] += xy[c] * (1 - f[2]);
+                    corner[c + 4] += xy[c] * f[2];
+                }
             }
             const double w = weight * half * lengthMm;
-            for (int c = 0; c < 8; ++c) values_[index(cell[0] + (c & 1), cell[1] + ((c >> 1) & 1), cell[2] + ((c >> 2) & 1))] += w * corner[static_cast<size_t>(c)];
+            double* first = &values_[index(cell[0], cell[1], cell[2])];
+            for (size_t c = 0; c < 8; ++c) first[offset[c]] += w * corner[c];
             ta = tb;
         }
         if (!(next[k] < t1)) break;

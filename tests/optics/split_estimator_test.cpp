@@ -385,7 +385,7 @@ TEST(AdaptiveSampling, TracesMorePhotonsWhereTheTracedEmissionMissesTheTarget) {
 // the fixed count.
 TEST(AdaptiveSampling, TracesMoreFieldPhotonsWhereTheFieldMissesTheTarget) {
     const Scene scene = filamentScene(2.0);
-    constexpr uint64_t kField = 20000, kPhotons = uint64_t(1) << 13;
+    constexpr uint64_t kField = 20000;
     const optics::PlaneImage fixed = render(scene, optics::Estimator::Split, 2, 51, std::nullopt, kField);
     const optics::PlaneImage adaptive = render(scene, optics::Estimator::Split, 2, 51, 0.05, kField);
     auto fieldRatio = [](const optics::PlaneImage& r) {
