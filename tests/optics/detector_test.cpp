@@ -410,23 +410,23 @@ TEST(Detector, GammaAndNormalSamplerMoments) {
 TEST(Detector, OneAndFifteenDegreesOfFreedomReadTheVarianceAlike) {
     constexpr size_t kPixels = 20000;
     constexpr double kShare = 0.2, kRead = 1.4;
-    std::vector<double> signal(kPixels), halfDifference(kPixels), slots(kPixels);
+    std::vector<double> signal(kPixels), fromHalves(kPixels), fromSlots(kPixels);
     Rng rng(9, 0);
     for (size_t i = 0; i < kPixels; ++i) {
         signal[i] = 100.0 + static_cast<double>(i % 997);
         const double variance = kShare * (signal[i] + kRead * kRead);
-        halfDifference[i] = sqr(std::sqrt(variance) * sampleStandardNormal(rng)) / kMedianOfChiSquare1;
+        fromHalves[i] = sqr(std::sqrt(variance) * sampleStandardNormal(rng)) / kMedianOfChiSquare1;  // a half difference, squared
         // 16 slots, each an estimate with 16 times the mean's variance; the mean's variance from their spread.
         std::array<double, 16> x{};
         double mean = 0;
         for (double& v : x) mean += (v = std::sqrt(16 * variance) * sampleStandardNormal(rng)) / 16;
-        for (double v : x) slots[i] += sqr(v - mean) / (16 * 15);
+        for (double v : x) fromSlots[i] += sqr(v - mean) / (16 * 15);
     }
     // Standard errors of the medians: sqrt(1/4 / n) over the density at the median, chi-square(1) at 0.455
     // (0.471, then scaled by 1/0.455) and chi-square(15)/15 at 0.956 (1.119).
     const double se1 = 0.5 / std::sqrt(double(kPixels)) / 0.4711 / kMedianOfChiSquare1, se15 = 0.5 / std::sqrt(double(kPixels)) / 1.119;
-    EXPECT_NEAR(medianVarianceOverCamera(halfDifference, signal, 0.0, 0.0, kRead) / kShare, 1.0, 4 * se1);
-    EXPECT_NEAR(medianVarianceOverCamera(slots, signal, 0.0, 0.0, kRead) / kShare, 0.9559, 4 * se15);
+    EXPECT_NEAR(medianVarianceOverCamera(fromHalves, signal, 0.0, 0.0, kRead) / kShare, 1.0, 4 * se1);
+    EXPECT_NEAR(medianVarianceOverCamera(fromSlots, signal, 0.0, 0.0, kRead) / kShare, 0.9559, 4 * se15);
 }
 
 }  // namespace
