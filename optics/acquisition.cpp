@@ -206,6 +206,9 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
     std::vector<double> computed(r.electrons.size(), 0.0);
     std::shared_ptr<const EmissionPoints> emissionPoints;
     std::unique_ptr<const BeamExcitationField> field;
+    // The traced photons' sources in the field-lit dye: their density is the field's, so the traces with one
+    // field share them, and more field makes them again.
+    std::optional<DyeCells> dyeCells;
     auto fieldComplete = [&] {
         return !field || std::all_of(field->fields().begin(), field->fields().end(), [](const BeamFluence& f) { return f.stats.complete; });
     };
@@ -245,6 +248,7 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
             std::vector<BeamFluence> pooled;
             for (size_t i = 0; i < field->fields().size(); ++i) pooled.push_back(pooledFluence(field->fields()[i], extra->fields()[i]));
             field = std::make_unique<const BeamExcitationField>(std::move(pooled));
+            dyeCells.reset();
         }
         return fieldComplete() && makeComputed();
     };
@@ -282,10 +286,11 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         // `photons` of the plane's photons, from the streams `streams` apart from the first's (false: cancelled).
         auto traceEmission = [&](uint64_t photons, uint64_t streams, ScatteredEmissionImage& into) {
             covered.emplace(imaging, model, emissionPoints.get(), imaging.centre(), o.poolingFraction);
+            if (field && !field->fields().empty() && !dyeCells) dyeCells.emplace(scene, tracer, *field, tracer.lineWavelengths(), detection, imaging, o.threads);
             ScatteredEmissionOptions count = o.emission;
             count.photons = photons;
-            into = traceScatteredEmission(scene, tracer, imaging, *covered, *emissionPoints, field.get(), detection, detector.exposureS, count, o.seed,
-                                          streams ? mixBits(streamKey + streams) : streamKey, o.threads, o.cancel);
+            into = traceScatteredEmission(scene, tracer, imaging, *covered, *emissionPoints, field.get(), dyeCells ? &*dyeCells : nullptr, detection,
+                                          detector.exposureS, count, o.seed, streams ? mixBits(streamKey + streams) : streamKey, o.threads, o.cancel);
             return into.complete;
         };
         const uint64_t first = o.emission.photonsFor(static_cast<size_t>(width) * height);

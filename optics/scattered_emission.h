@@ -19,6 +19,7 @@
 #include <optional>
 #include <vector>
 
+#include "optics/dye_cells.h"
 #include "optics/imaging.h"
 #include "optics/unscattered_image.h"
 #include "render/fluence_field.h"
@@ -74,11 +75,13 @@ ScatteredEmissionImage pooledTraces(const ScatteredEmissionImage& a, const Scatt
 
 // Traces the photons of `emission` (a plane's computed emission) for one plane. `covered` decides which
 // points the computed part holds (CameraPathImaging::computesUnscatteredAt) and how finely a vertex is imaged
-// (imageLevel); `detection` gives photoelectrons per joule at λ. Refracting surfaces on the way to the
+// (imageLevel); `detection` gives photoelectrons per joule at λ. With a field, `dyeCells` (built for this
+// channel from `field` or an earlier estimate of it over the same box: only its density changes) are the
+// field-lit emission's sources; without them the lattice's points carry the computed emission. Refracting surfaces on the way to the
 // objective are taken as the camera paths take them (Imaging::cameraStart). The image does not depend on
 // the thread count.
 ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTracer& tracer, const Imaging& imaging, const CameraPathImaging& covered,
-                                              const EmissionPoints& emission, const BeamExcitationField* field,
+                                              const EmissionPoints& emission, const BeamExcitationField* field, const DyeCells* dyeCells,
                                               const std::function<double(double)>& detection, double exposureS,
                                               const ScatteredEmissionOptions& options, uint64_t seed, uint64_t streamKey, int threads,
                                               const std::atomic<bool>* cancel = nullptr);
