@@ -129,8 +129,11 @@ public:
     double absorptionAt(double lambdaNm) const { return absorptionCoefficient<double>(sigmaA_, dyes_, molar_, lambdaNm); }
     double scatteringAt(double lambdaNm) const { return sigmaS_(lambdaNm); }
 
+    // `fewCollisions`: one segment at the fields' largest values also where they expect at most this many
+    // collisions over [tMin, tMax] at the hero wavelength (a thin residual over a short line: ratio tracking
+    // then looks up so few points that the grid's DDA costs more, and a larger majorant adds no variance).
     template <class ToMajorant>
-    MediumMajorantIterator<ToMajorant> majorants(const Ray& ray, double tMin, double tMax, ToMajorant toMajorant) const {
+    MediumMajorantIterator<ToMajorant> majorants(const Ray& ray, double tMin, double tMax, ToMajorant toMajorant, double fewCollisions = 0) const {
         if (!volume_) return {std::nullopt, tMin, tMax, constants_.data(), std::move(toMajorant)};
         // Where the fields' largest values bound the coefficient within kLooseMajorant of its floor (dye in
         // tissue that scatters more than the dye absorbs), one segment at those values spares the grid's DDA
@@ -140,7 +143,7 @@ public:
         const SampledSpectrum most = toMajorant(channelMax_.data()), least = toMajorant(channelFloor_.data());
         bool loose = true;
         for (int i = 0; i < kNumWavelengths && loose; ++i) loose = most[i] <= kLooseMajorant * least[i];
-        if (loose) return {std::nullopt, tMin, tMax, channelMax_.data(), std::move(toMajorant)};
+        if (loose || most[0] * (tMax - tMin) <= fewCollisions) return {std::nullopt, tMin, tMax, channelMax_.data(), std::move(toMajorant)};
         return {volume_->traverse(ray, tMin, tMax), tMin, tMax, constants_.data(), std::move(toMajorant)};
     }
     static constexpr double kLooseMajorant = 1.5;

@@ -195,6 +195,7 @@ PathTracer::TransmittanceEstimate PathTracer::estimateTransmittance(const Vec3& 
                                                                     Rng& rng, const Vec3* surfaceNormal, double surfaceEpsilon,
                                                                     bool untilRefraction, bool residual) const {
     TransmittanceEstimate e{SampledSpectrum(1.0), SampledSpectrum(1.0), SampledSpectrum(1.0)};
+    const bool oneLine = std::all_of(wl.lambda.begin(), wl.lambda.end(), [&](double l) { return l == wl.lambda[0]; });
     // Rays start exactly on surfaces and skip self-intersections with tMin, so every segment lies on
     // the line from p0 to p1 and its length is exact.
     Vec3 origin = p0;
@@ -224,7 +225,7 @@ PathTracer::TransmittanceEstimate PathTracer::estimateTransmittance(const Vec3& 
                 e.T *= T;
                 e.r_u *= T / T[0];
                 e.r_l *= T / T[0];
-            } else if (!ratioTrack(med, spec, r, segment, rng, e, residual)) {
+            } else if (!ratioTrack(med, spec, r, segment, rng, e, residual, oneLine)) {
                 return {SampledSpectrum(0.0), e.r_u, e.r_l};
             }
         }
@@ -243,7 +244,7 @@ PathTracer::TransmittanceEstimate PathTracer::estimateTransmittance(const Vec3& 
 }
 
 bool PathTracer::ratioTrack(const Medium& med, const MediumSpectra& spec, const Ray& r, double length, Rng& rng, TransmittanceEstimate& e,
-                            bool residual) const {
+                            bool residual, bool oneLine) const {
     // Ratio tracking (pbrt-v4's TraceTransmittance) with the hero wavelength's majorant; r_u and r_l
     // carry the path pdf ratios that spectral MIS needs, with roulette once the estimate is small.
     // Residual tracking (Novák et al. 2014) takes the channels' floors (the constant tissue, the
@@ -253,6 +254,13 @@ bool PathTracer::ratioTrack(const Medium& med, const MediumSpectra& spec, const 
     // The residual's majorant is raised kResidualMajorantScale times: ratio tracking's relative variance
     // falls as σ²L/σ̄, and the residual (a sparse dye) is so thin that the extra lookups cost little.
     constexpr double kResidualMajorantScale = 8;
+    // A residual whose largest value anywhere expects at most this many collisions (at the raised majorant)
+    // over the line is tracked in one segment: a traced vertex's line to the objective through sparse dye
+    // crosses tens of majorant cells for a few look-ups (docs/performance.md, "The residual in one segment").
+    // Only at one spectral line (the traced photons, the beams' lines), where it was measured: a path's
+    // companion wavelengths are weighed by their majorant over the hero's at each collision, and the medium's
+    // largest residual can hold another dye's peak at a companion where the local cells hold none.
+    constexpr double kFewResidualCollisions = 8;
     ChannelValues floor{};
     if (residual) {
         floor = med.channelFloor();
@@ -273,7 +281,7 @@ bool PathTracer::ratioTrack(const Medium& med, const MediumSpectra& spec, const 
     auto majorants = med.majorants(r, 0.0, length, [&](const double* values) {
         segmentMaxima = values;
         return residual ? above(values) * kResidualMajorantScale : above(values);
-    });
+    }, residual && oneLine ? kFewResidualCollisions : 0.0);
     const SampledSpectrum T_maj = sampleTmaj<SampledSpectrum>(majorants, rng, [&](double t, const SampledSpectrum& sigmaMaj, const SampledSpectrum& Tm) {
         ChannelValues ch;
         med.channelValues(r.at(t), ch.data(), segmentMaxima);

@@ -247,9 +247,11 @@ private:
     // chainTransmittance with the path pdf ratios of its null collisions.
     TransmittanceEstimate estimateChainTransmittance(const SphericalShells& sh, const Vec3& p, const ShellPath& chain, const Vec3& target,
                                                      const SampledWavelengths& wl, Rng& rng) const;
-    // Ratio tracking over [0, length) of r in a grid medium; false once the estimate is zero.
+    // Ratio tracking over [0, length) of r in a grid medium; false once the estimate is zero. `oneLine`: every
+    // wavelength is the hero's (a spectral line), so one segment at the medium's largest residual weighs no
+    // companion wavelength by more than the hero's majorant.
     bool ratioTrack(const Medium& med, const MediumSpectra& spec, const Ray& r, double length, Rng& rng, TransmittanceEstimate& e,
-                    bool residual) const;
+                    bool residual, bool oneLine) const;
     PathRadiance trace(PathState& state, const SampledWavelengths& wl, Rng& rng, PathStats& stats) const;
     // A path that starts at p in an isotropic direction (a re-emission point) with throughput beta.
     PathRadiance traceFromEmission(const Vec3& p, int medium, const SampledWavelengths& wl, const SampledSpectrum& beta, int depth,

@@ -117,6 +117,24 @@ TEST(GridMedium, RatioTrackingThroughGaussianBlob) {
     }
 }
 
+// A thin blob (A = 0.25 /mm, optical depth 0.1 through its centre): its largest value over the 1.8 mm the
+// line spends in the box expects 8 × 0.25 × 1.8 = 3.6 collisions at the residual's raised majorant, so
+// ratio tracking takes the line in one segment at that value instead of the majorant grid's cells
+// (Medium::majorants' fewCollisions). The optical depth is the same closed form as above.
+TEST(GridMedium, RatioTrackingThroughAThinBlobInOneSegment) {
+    const double h = 0.01, w = 16 * h, A = 0.25;
+    const DensityGrid g = DensityGrid::fromVoxels("blob", {{-80, -12, -4}, {80, 12, 4}}, voxelsAt(h, Vec3()), [&](int i, int j, int k) {
+        return std::exp(-(i * i + j * j + k * k) * h * h / (2 * w * w));
+    });
+    const GridBox box = absorbingGridBox(g, A, Vec3(-0.9, -0.13, -0.05), Vec3(0.9, 0.13, 0.05));
+    for (double b : {0.0, 0.05}) {
+        const double tau = A * w * std::sqrt(2 * kPi) * std::exp(-b * b / (2 * w * w));
+        char name[64];
+        std::snprintf(name, sizeof name, "thin blob, b = %.2f mm, one segment", b);
+        expectTransmittance(meanTransmittance(box.scene, Vec3(-2, b, 0), Vec3(2, b, 0), kNone, 50000, static_cast<uint64_t>(60 + 100 * b)), std::exp(-tau), name);
+    }
+}
+
 // A one-voxel sheet (value v at k = 0) is a tent of half-width h in z, so a ray at angle θ to it sees
 // optical depth sigma v h / sin θ, however grazing, as long as it crosses the sheet inside its extent.
 TEST(GridMedium, OneVoxelSheetAtGrazingAngles) {
