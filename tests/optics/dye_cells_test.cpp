@@ -10,11 +10,9 @@
 
 #include "core/rng.h"
 #include "optics/dye_cells.h"
-#include "optics/light_sheet.h"
 #include "optics/acquisition.h"
 #include "optics/unscattered_image.h"
-#include "support/fluorescent_scenes.h"
-#include "volume/volume_fields.h"
+#include "support/sheet_scenes.h"
 
 namespace fluorosim {
 namespace {
@@ -28,28 +26,8 @@ double micromolar(int i, int j, int k) { return 200.0 * std::exp(-(j * j + k * k
 const IndexBox kVoxels{{-15, -6, -5}, {15, 6, 12}};
 
 Scene tissue() {
-    Scene scene;
-    scene.spectral.lambdaMin = 450;
-    scene.spectral.lambdaMax = 750;
-    const DensityGrid g = DensityGrid::fromVoxels("AF594", kVoxels, Affine::scaling(kVoxelMm), micromolar);
-    std::vector<VolumeChannel> ch(3);
-    ch[kSolventChannel].offset = 1;
-    ch[kScatteringChannel].offset = 1;
-    ch[kFirstDyeChannel].grid = g;
-    ch[kFirstDyeChannel].scale = 1e-6;
-    auto volume = std::make_shared<const VolumeFields>(std::move(ch), Affine(), Interpolation::Trilinear, MajorantGridOptions{});
-    scene.media.emplace_back("tissue", Spectrum::constant(0.0), Spectrum::constant(2.0), 0.9, 1.33,
-                             std::vector<DyeComponent>{{databaseDye("AF594"), 0.0}}, volume);
-    addBath(scene, 0.4, 0);
-    LightSheetSpec spec;
-    spec.wavelengthNm = 561;
-    spec.powerMw = 1;
-    spec.waistMm = 0.003;
-    spec.heightMm = 0.1;
-    spec.refractiveIndex = 1.33;
-    scene.lights.push_back(BeamLight{optics::makeLightSheet(spec), spec});
-    scene.camera.medium = 0;
-    scene.finalize();
+    Scene scene = af594Tissue(DensityGrid::fromVoxels("AF594", kVoxels, Affine::scaling(kVoxelMm), micromolar), 2.0);
+    addSheetAndFinalize(scene, 0.003, 0.1);
     return scene;
 }
 

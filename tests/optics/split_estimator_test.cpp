@@ -18,9 +18,9 @@
 
 #include "core/errors.h"
 #include "optics/acquisition.h"
-#include "optics/light_sheet.h"
 #include "optics/scattered_emission.h"
 #include "support/fluorescent_scenes.h"
+#include "support/sheet_scenes.h"
 #include "support/test_scenes.h"
 #include "volume/volume_fields.h"
 
@@ -40,29 +40,9 @@ Scene filamentScene(double sigmaS, double sheetHeightMm = 0.1, IndexBox voxels =
                         const double inSheet = std::exp(-(j * j + k * k) / 2.0), beside = std::exp(-(j * j + (k - 8) * (k - 8)) / 2.0);
                         return 200.0 * inSheet + 100.0 * beside;
                     }) {
-    Scene scene;
-    scene.spectral.lambdaMin = 450;
-    scene.spectral.lambdaMax = 750;
     const double voxel = 0.002;
-    const DensityGrid g = DensityGrid::fromVoxels("AF594", voxels, Affine::scaling(voxel), micromolar);
-    std::vector<VolumeChannel> ch(3);
-    ch[kSolventChannel].offset = 1;
-    ch[kScatteringChannel].offset = 1;
-    ch[kFirstDyeChannel].grid = g;
-    ch[kFirstDyeChannel].scale = 1e-6;
-    auto volume = std::make_shared<const VolumeFields>(std::move(ch), Affine(), Interpolation::Trilinear, MajorantGridOptions{});
-    scene.media.emplace_back("tissue", Spectrum::constant(0.0), Spectrum::constant(sigmaS), 0.9, 1.33,
-                             std::vector<DyeComponent>{{databaseDye("AF594"), 0.0}}, volume);
-    addBath(scene, 0.4, 0);
-    LightSheetSpec spec;
-    spec.wavelengthNm = 561;
-    spec.powerMw = 1;
-    spec.waistMm = 0.003;
-    spec.heightMm = sheetHeightMm;
-    spec.refractiveIndex = 1.33;
-    scene.lights.push_back(BeamLight{optics::makeLightSheet(spec), spec});
-    scene.camera.medium = 0;
-    scene.finalize();
+    Scene scene = af594Tissue(DensityGrid::fromVoxels("AF594", voxels, Affine::scaling(voxel), micromolar), sigmaS);
+    addSheetAndFinalize(scene, 0.003, sheetHeightMm);
     return scene;
 }
 

@@ -9,9 +9,9 @@
 #include "core/errors.h"
 #include "optics/acquisition.h"
 #include "optics/imaging.h"
-#include "optics/light_sheet.h"
 #include "optics/unscattered_image.h"
 #include "support/fluorescent_scenes.h"
+#include "support/sheet_scenes.h"
 #include "volume/volume_fields.h"
 
 namespace fluorosim {
@@ -22,9 +22,6 @@ using namespace testing;
 // AF594 on 0.5 µm voxels (or `voxel`): a dendrite-like filament along x through the sheet, one crossing it at 45°,
 // and a blob off the focal plane, in weakly scattering tissue (σs 1/mm) inside a water bath.
 Scene neuriteScene(double sigmaS, double voxel = 0.0005) {
-    Scene scene;
-    scene.spectral.lambdaMin = 450;
-    scene.spectral.lambdaMax = 750;
     const DensityGrid g = DensityGrid::fromVoxels("AF594", {{-24, -24, -12}, {24, 24, 12}}, Affine::scaling(voxel), [](int i, int j, int k) {
         const double along = std::exp(-(sqr(j - 2) + sqr(k)) / 1.2);
         const double diagonal = std::exp(-(sqr(i - j) / 2.0 + sqr(k + 1)) / 1.5);
@@ -32,24 +29,8 @@ Scene neuriteScene(double sigmaS, double voxel = 0.0005) {
         const double v = 10.0 * along + 6.0 * diagonal + 8.0 * blob;
         return v > 0.05 ? v : 0.0;
     });
-    std::vector<VolumeChannel> ch(3);
-    ch[kSolventChannel].offset = 1;
-    ch[kScatteringChannel].offset = 1;
-    ch[kFirstDyeChannel].grid = g;
-    ch[kFirstDyeChannel].scale = 1e-6;  // µM
-    auto volume = std::make_shared<const VolumeFields>(std::move(ch), Affine(), Interpolation::Trilinear, MajorantGridOptions{});
-    scene.media.emplace_back("tissue", Spectrum::constant(0.0), Spectrum::constant(sigmaS), 0.9, 1.33,
-                             std::vector<DyeComponent>{{databaseDye("AF594"), 0.0}}, volume);
-    addBath(scene, 0.4, 0);
-    LightSheetSpec spec;
-    spec.wavelengthNm = 561;
-    spec.powerMw = 1;
-    spec.waistMm = 0.002;
-    spec.heightMm = 0.1;
-    spec.refractiveIndex = 1.33;
-    scene.lights.push_back(BeamLight{optics::makeLightSheet(spec), spec});
-    scene.camera.medium = 0;
-    scene.finalize();
+    Scene scene = af594Tissue(g, sigmaS);
+    addSheetAndFinalize(scene, 0.002, 0.1);
     return scene;
 }
 

@@ -11,10 +11,10 @@
 #include <vector>
 
 #include "core/sampling.h"
-#include "optics/light_sheet.h"
 #include "render/fluence_field.h"
 #include "render/path_tracer.h"
 #include "support/fluorescent_scenes.h"
+#include "support/sheet_scenes.h"
 
 namespace fluorosim {
 namespace {
@@ -27,15 +27,7 @@ Scene sheetInTissue(double sigmaS, double g) {
     scene.spectral.lambdaMax = 750;
     addDyedMedium(scene, "tissue", 0.0, sigmaS, g, 1.33, {});
     addBath(scene, 0.4, 0);
-    LightSheetSpec spec;
-    spec.wavelengthNm = 561;
-    spec.powerMw = 1;
-    spec.waistMm = 0.003;
-    spec.heightMm = 0.1;
-    spec.refractiveIndex = 1.33;
-    scene.lights.push_back(BeamLight{optics::makeLightSheet(spec), spec});
-    scene.camera.medium = 0;
-    scene.finalize();
+    addSheetAndFinalize(scene, 0.003, 0.1);
     return scene;
 }
 
