@@ -1,9 +1,10 @@
-// Surface look-ups of a light-sheet scene: a tissue block inside a water bath (two boxes of 12 triangles, in
-// mm, as samples/lightsheet has them), rays from inside the block in isotropic directions to infinity, as the
+// Surface look-ups of a light-sheet scene: samples/lightsheet's tissue block inside its water bath (two boxes
+// of 12 triangles), rays from inside the block in isotropic directions to infinity, as the
 // photons' free flights ask for them.
 #include <benchmark/benchmark.h>
 
 #include <cmath>
+#include <string>
 #include <vector>
 
 #include "core/math.h"
@@ -14,18 +15,17 @@ namespace {
 
 using namespace fluorosim;
 
-TriangleMesh boxMesh(const Vec3& lo, const Vec3& hi) {
-    TriangleMesh m;
-    for (int i = 0; i < 8; ++i) m.positions.push_back(Vec3((i & 1) ? hi.x : lo.x, (i & 2) ? hi.y : lo.y, (i & 4) ? hi.z : lo.z));
-    // Two triangles per face, wound outward.
-    m.indices = {0, 2, 1, 1, 2, 3, 4, 5, 6, 5, 7, 6, 0, 1, 4, 1, 5, 4, 2, 6, 3, 3, 6, 7, 0, 4, 2, 2, 4, 6, 1, 3, 5, 3, 7, 5};
-    return m;
+// One of the sample's meshes (µm in its file) in mm, as the scene loader scales it.
+TriangleMesh sampleMesh(const std::string& file) {
+    TriangleMesh mesh = loadMesh(std::string(FLUOROSIM_SOURCE_DIR) + "/samples/" + file);
+    for (Vec3& p : mesh.positions) p = p * 1e-3;
+    return mesh;
 }
 
 void BM_BoxSceneIntersect(benchmark::State& state) {
     Geometry geometry;
-    geometry.addMesh(boxMesh(Vec3(-1.1, -0.87, -0.36), Vec3(0.55, 0.57, 1.2)));
-    geometry.addMesh(boxMesh(Vec3(-1.0, -0.77, -0.26), Vec3(0.45, 0.47, 0.25)));
+    geometry.addMesh(sampleMesh("lightsheet/neurons_bath.obj"));
+    geometry.addMesh(sampleMesh("neurons/tissue_block.obj"));
     geometry.commit();
     constexpr int kRays = 4096;
     std::vector<Ray> rays;
