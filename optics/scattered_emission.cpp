@@ -291,10 +291,10 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
         // the crossing (0 otherwise: light the camera's model leaves out).
         double transmittanceToCamera(const Vec3& v, const Vec3& focal, const Vec3& w, double sv, double reach, int medium,
                                      const SampledWavelengths& wl) {
-            if (!bends) return tracer.transmittance(v, v + w * reach, medium, wl, *rng)[0];  // no line can end at a refraction
             const Vec3 lower = sv < 0 ? v : focal;
             const double span = sv < 0 ? reach : reach - sv;
-            const StraightLine line = traceStraightLine(scene, Ray{lower, w}, medium, 0.0, span, LineSurfaces::UntilRefraction);
+            // Without refracting surfaces no line can end at one: the tracer's transmittance finds the rest.
+            const StraightLine line = bends ? traceStraightLine(scene, Ray{lower, w}, medium, 0.0, span, LineSurfaces::UntilRefraction) : StraightLine{};
             if (line.end != LineEnd::Refraction) return tracer.transmittance(v, v + w * reach, medium, wl, *rng)[0];
             const double toRefraction = line.segments.empty() ? 0.0 : line.segments.back().t1;
             const double sRefraction = (sv < 0 ? sv : 0.0) + toRefraction;  // from the crossing
