@@ -29,6 +29,7 @@ struct AcquireRequest {
     std::optional<double> fieldMarginUm, fieldReachUm;  // how far it reaches beyond the computed region and from the focal plane
     std::optional<double> fieldDiffuseUm;               // its diffuse light's node spacing
     std::optional<int64_t> emissionPhotons;  // the scattered emission's photons per plane and channel (0: paths carry it)
+    std::optional<double> emissionTrackUm;   // how near focus its scattering is imaged along the flights (0: at the vertices)
 };
 
 // --exposure: a time replaces the scene's; "auto[:F]" asks for autoExpose after the stack is acquired.
@@ -84,6 +85,8 @@ inline void checkAcquireRequest(const AcquireRequest& a) {
         throw ConfigError("--field-diffuse-um: must be 0 (no diffuse grid) or lie in [1, 1000], got " + std::to_string(*a.fieldDiffuseUm));
     if (a.emissionPhotons && (*a.emissionPhotons < 0 || *a.emissionPhotons == 1 || *a.emissionPhotons > (int64_t(1) << 40)))
         throw ConfigError("--emission-photons: must be 0 (paths carry the scattered emission) or lie in [2, 2^40], got " + std::to_string(*a.emissionPhotons));
+    if (a.emissionTrackUm && !(*a.emissionTrackUm >= 0 && *a.emissionTrackUm <= 1000))
+        throw ConfigError("--emission-track-um: must lie in [0, 1000], got " + std::to_string(*a.emissionTrackUm));
 }
 
 // The stack overrides (planes, step) of acquire and fit, applied to `m` and validated against the scene.
@@ -129,6 +132,7 @@ inline AcquireOptions applyAcquireRequest(const AcquireRequest& a, const Scene& 
     if (a.fieldReachUm) o.field.reachUm = *a.fieldReachUm;
     if (a.fieldDiffuseUm) o.field.diffuseUm = *a.fieldDiffuseUm;
     if (a.emissionPhotons) o.emission.photons = static_cast<uint64_t>(*a.emissionPhotons);
+    if (a.emissionTrackUm) o.emission.trackSlabMm = *a.emissionTrackUm * 1e-3;
     return o;
 }
 

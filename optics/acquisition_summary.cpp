@@ -80,6 +80,11 @@ std::string AcquisitionSummary::addPlane(size_t slot, int plane, const PlaneImag
     std::sort(sorted.begin(), sorted.end());
     const double cut = sorted[static_cast<size_t>(0.9 * static_cast<double>(sorted.size() - 1))];
     const double cut1 = sorted[static_cast<size_t>(0.99 * static_cast<double>(sorted.size() - 1))];
+    for (size_t i = 0; i < image.electrons.size(); ++i) {
+        const double r = sqr(image.stderrElectrons[i]) / (std::max(0.0, image.electrons[i]) + darkElectrons_ + sqr(readNoise_));
+        mcOverCameraLargest_ = std::max(mcOverCameraLargest_, r);
+        if (r > 1) ++mcOverCameraAbove1_;
+    }
     const bool traced = image.emissionEstimates.size() >= 2;
     const size_t halfSlots = image.emissionEstimates.size() / 2;
     for (size_t i = 0; i < image.electrons.size(); ++i)
@@ -170,6 +175,8 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
         // The standard errors' own estimate (heavy tails make it optimistic; scripts/noise-vs-time.sh
         // measures with two seeds), at the scene's exposure.
         {"", "median_mc_over_camera_variance_top10", median(mcOverCamera_)},
+        {"", "largest_mc_over_camera_variance", mcOverCameraLargest_},
+        {"", "pixels_mc_over_camera_variance_above_1", double(mcOverCameraAbove1_), false, true},
         {"", "mean_path_spp", double(pathSamples_) / std::max<double>(1.0, double(pixels_))},
         {"", "pilot_paths", double(pilotSamples_), false, true},
         // Planes (per channel) whose pilot lattice found the paths at the target with spp, so that no other pixel drew pilots.

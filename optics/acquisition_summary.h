@@ -49,6 +49,10 @@ private:
     double seconds_ = 0, largest_ = 0, largestOverPixel_ = 0, computedSum_ = 0, pathSum_ = 0, pooledSum_ = 0, computedSeconds_ = 0, pathSeconds_ = 0;
     std::vector<double> pathRel_;       // relative standard errors over the brightest pixels
     std::vector<double> mcOverCamera_;  // Monte Carlo variance over the camera's noise variance, brightest pixels
+    // Over every pixel: the largest Monte Carlo variance over the camera's, and the pixels where it is above 1
+    // (Monte Carlo noise above the camera's: specks a viewer sees).
+    double mcOverCameraLargest_ = 0;
+    uint64_t mcOverCameraAbove1_ = 0;
     uint64_t pathSamples_ = 0, pilotSamples_ = 0, pixels_ = 0, computedPoints_ = 0, nonFinite_ = 0;
     uint64_t pilotsOnLatticeOnlyPlanes_ = 0;
     double computedDropped_ = 0;

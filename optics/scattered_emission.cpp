@@ -42,6 +42,9 @@ constexpr double kUniformShare = 0.05;
 constexpr double kInvisible = 0.5;
 constexpr double kFarMm = 0.1;
 constexpr uint64_t kPhotonsPerPoint = 4;
+// The largest share of a photon's power one point of its flight near focus is imaged with (the track-length
+// estimator's points per flight follow from it).
+constexpr double kTrackShare = 1.0;
 
 // The photons' wavelengths: in proportion to the scene's dyes' emission times the detection, on 1 nm cells,
 // each at its largest value over 9 points across it (a filter's edge inside a cell must not leave the density
@@ -125,6 +128,8 @@ void ScatteredEmissionOptions::validate() const {
     if (directions < 1 || directions > 1024) throw ConfigError("scattered emission directions per vertex must lie in [1, 1024], got " + std::to_string(directions));
     if (!(towardObjective >= 0 && towardObjective < 1))
         throw ConfigError("scattered emission share toward the objective must lie in [0, 1), got " + std::to_string(towardObjective));
+    if (!(trackSlabMm >= 0 && trackSlabMm <= 1))
+        throw ConfigError("scattered emission track slab must lie in [0, 1] mm, got " + std::to_string(trackSlabMm));
 }
 
 uint64_t ScatteredEmissionOptions::photonsFor(size_t pixels) const {
@@ -216,7 +221,8 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
         }
         double survival(const Photon& ph, const Vec3& p) override { return weightWindowSurvival(ph.weight, importance(imaging.local(p)), unitPower); }
 
-        void image(const Photon& ph, const Vec3& v, const HenyeyGreenstein* phase) {
+        void image(const Photon& ph, const Vec3& v, const HenyeyGreenstein* phase) { image(ph, v, phase, directions); }
+        void image(const Photon& ph, const Vec3& v, const HenyeyGreenstein* phase, int n) {
             if (!(ph.weight > 0) || ph.medium == kNone) return;
             ++slot->vertices;
             const Imaging::Local lv = imaging.local(v);
@@ -225,7 +231,6 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
             const double toFront = imaging.workingDistanceMm() - dz;
             if (!(toFront > 0)) return;
             const int level = std::clamp(covered.imageLevel(v), 0, kImageLevels - 1);
-            const int n = directions;
             const double det = detection(ph.lambda);
             if (!(det > 0)) return;
             const SampledWavelengths wl = SampledWavelengths::atLine(ph.lambda, 1.0);
@@ -308,7 +313,40 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
             const double toSurface = sRefraction - sv;
             return rest * tracer.transmittance(v, v + w * std::max(0.0, toSurface - 1e-7), medium, wl, *rng)[0];
         }
-        void scattered(const Photon& ph, const Vec3& p) override { image(ph, p, &scene.media[static_cast<size_t>(ph.medium)].phase()); }
+        // Scattering within trackSlab of the focal plane is imaged along the flights (flew), not here.
+        double trackSlab = 0;
+        void scattered(const Photon& ph, const Vec3& p) override {
+            if (trackSlab > 0 && std::abs(imaging.local(p).dz) < trackSlab) return;
+            image(ph, p, &scene.media[static_cast<size_t>(ph.medium)].phase());
+        }
+        // The flight's part within trackSlab of the focal plane, imaged at points stratified along it, each
+        // weighed by σs there times the length it stands for (at most about kTrackShare of the photon's power)
+        // in half a vertex's directions: a point carries a few per cent of a photon where the tissue is thin.
+        void flew(const Photon& ph, double tEnd, const Medium& m, double sigmaS) override {
+            if (!(trackSlab > 0) || !(sigmaS > 0) || !(ph.weight > 0) || m.isVacuumLike()) return;
+            const double dz0 = imaging.local(ph.ray.o).dz, c = dot(ph.ray.d, axis);
+            double a = 0, b = tEnd;
+            if (c == 0) {
+                if (!(std::abs(dz0) < trackSlab)) return;
+            } else {
+                const double t1 = (-trackSlab - dz0) / c, t2 = (trackSlab - dz0) / c;
+                a = std::max(a, std::min(t1, t2));
+                b = std::min(b, std::max(t1, t2));
+            }
+            if (!(b > a)) return;
+            const double span = b - a;
+            ChannelValues ch{};
+            m.channelValues(ph.ray.at(a + 0.5 * span), ch.data());
+            const int points = static_cast<int>(std::clamp(std::ceil(sigmaS * ch[kScatteringChannel] * span / kTrackShare), 1.0, 64.0));
+            const HenyeyGreenstein& phase = m.phase();
+            for (int j = 0; j < points; ++j) {
+                const Vec3 x = ph.ray.at(a + (j + rng->uniform()) * span / points);
+                m.channelValues(x, ch.data());
+                Photon at = ph;
+                at.weight *= sigmaS * ch[kScatteringChannel] * span / points;
+                image(at, x, &phase, std::max(1, directions / 2));
+            }
+        }
         void reemitted(const Photon& ph, const Vec3& p) override { image(ph, p, nullptr); }
     };
 
@@ -335,6 +373,7 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
         projector.margin = psf.cutRadiusMm(scene.spectral.lambdaMax) + 2 * imaging.pixelMm();
         projector.axisScattering = &axisScattering;
         projector.bends = bends;
+        projector.trackSlab = options.trackSlabMm;
         // Photons leave each source point kPhotonsPerPoint at a time: the point's excitation (a beam
         // transmittance traced back to where the beam entered) is the costliest part of a photon.
         const std::vector<double>& lines = tracer.lineWavelengths();

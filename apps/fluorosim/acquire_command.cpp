@@ -196,6 +196,10 @@ void addAcquireCommand(CLI::App& app) {
                     "Split estimator: photons per plane and channel that trace the computed emission's scattered light forward and image "
                     "their vertices, where the tissue scatters the detected light (default 4 per pixel: 262144 on a 256 x 256 plane; 0: camera paths "
                     "carry it)");
+    cmd->add_option("--emission-track-um", a->emissionTrackUm,
+                    "Split estimator: within this distance (um) of the focal plane the traced photons' scattering is imaged at points along "
+                    "their flights, weighed by the scattering coefficient (a track-length estimator), instead of where they scatter (default "
+                    "20; 0: at every scattering)");
     cmd->add_option("--seed", a->seed, "Random seed (default: the scene's)");
     cmd->add_option("--exposure", a->exposure,
                     "Exposure: a time with a unit (\"20ms\"), or auto[:F]: after the stack is rendered, scale it to the exposure that puts "

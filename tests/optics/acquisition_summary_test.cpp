@@ -81,5 +81,37 @@ TEST(AcquisitionSummary, TheNoiseBudgetSplitsTheVarianceByPart) {
         }
 }
 
+// Specks: over every pixel, the largest Monte Carlo variance over the camera's and how many pixels hold more
+// Monte Carlo noise than camera noise. A dark plane of 100 pixels at 4 e- with read noise 2 e- (camera variance
+// 8): one pixel at stderr 4 (16 / 8 = 2), one at 3 (9 / 8), the rest at 2 (4 / 8, below 1).
+TEST(AcquisitionSummary, SpecksAreCountedOverEveryPixel) {
+    Microscope m;
+    m.width = m.height = 10;
+    m.detector.darkCurrentElectronsPerS = 0;
+    m.detector.readNoiseElectrons = 2;
+    m.channels.push_back({});
+    m.channels.back().name = "c";
+    Stack stack;
+    stack.width = stack.height = 10;
+    stack.planes = 1;
+    stack.channels = {0};
+    stack.expected.assign(100, 4.f);
+    stack.stderrElectrons.assign(100, 2.f);
+    AcquireOptions o;
+    AcquisitionSummary summary(m, stack, o);
+    PlaneImage image;
+    image.width = image.height = 10;
+    image.electrons.assign(100, 4.0);
+    image.stderrElectrons.assign(100, 2.0);
+    image.stderrElectrons[17] = 4.0;
+    image.stderrElectrons[93] = 3.0;
+    summary.addPlane(0, 0, image);
+    std::map<std::string, double> top;
+    for (const AcquisitionSummary::Entry& e : summary.entries(stack, m, std::nullopt, 1))
+        if (e.group.empty()) top[e.name] = e.value;
+    EXPECT_NEAR(top.at("largest_mc_over_camera_variance"), 2.0, 1e-12);
+    EXPECT_EQ(top.at("pixels_mc_over_camera_variance_above_1"), 2.0);
+}
+
 }  // namespace
 }  // namespace fluorosim::optics

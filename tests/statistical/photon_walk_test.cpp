@@ -10,6 +10,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <vector>
 
 #include "core/rng.h"
 #include "core/sampling.h"
@@ -105,6 +107,76 @@ TEST(PhotonWalk, RouletteAndSplittingLeaveTheTalliesUnbiased) {
     EXPECT_LT(std::abs(z(roulette.escaped, analog.escaped)), 4);
     EXPECT_LT(std::abs(z(window.escaped, analog.escaped)), 4);
     EXPECT_LT(window.heaviest, roulette.heaviest);
+}
+
+// The power scattered in a slab |x - 0.5| < 0.05 through the ball, counted at the scatterings and along the
+// flights (walkPhoton's `flew`: σs times each flight's length inside the slab, a track-length estimate of the
+// same mean), by an analog walk and by the weight window's (copies walk flights of their own). They agree
+// within 4 standard errors, and the flights' estimate has the smaller error: every photon that crosses the
+// slab adds to it, not only the few that scatter there.
+TEST(PhotonWalk, FlightsGiveTheScatteringsTrackLengthEstimate) {
+    Scene scene;
+    const int tissue = addMedium(scene, "tissue", 0.3, 8, 0.8, 1.0);
+    addInterfaceSphere(scene, Vec3(0, 0, 0), 1.0, tissue, kNone);
+    scene.finalize();
+    constexpr double kSlabX = 0.5, kHalf = 0.05;
+    struct Slab final : PhotonEvents {
+        bool window = false;
+        double atScatterings = 0, alongFlights = 0;
+        int flights = 0;
+        void scattered(const Photon& ph, const Vec3& p) override {
+            if (std::abs(p.x - kSlabX) < kHalf) atScatterings += ph.weight;
+        }
+        void flew(const Photon& ph, double tEnd, const Medium& m, double sigmaS) override {
+            ++flights;
+            double a = 0, b = tEnd;
+            if (ph.ray.d.x == 0) {
+                if (!(std::abs(ph.ray.o.x - kSlabX) < kHalf)) return;
+            } else {
+                const double t1 = (kSlabX - kHalf - ph.ray.o.x) / ph.ray.d.x, t2 = (kSlabX + kHalf - ph.ray.o.x) / ph.ray.d.x;
+                a = std::max(a, std::min(t1, t2));
+                b = std::min(b, std::max(t1, t2));
+            }
+            if (!(b > a)) return;
+            ChannelValues ch{};
+            m.channelValues(ph.ray.at(0.5 * (a + b)), ch.data());
+            alongFlights += ph.weight * sigmaS * ch[kScatteringChannel] * (b - a);
+        }
+        double survival(const Photon& ph, const Vec3& p) override {
+            if (!window) return 1.0;
+            const double q = ph.weight * (std::abs(p.x - kSlabX) < 0.2 ? 1.0 : 0.25);
+            return q < 0.5 || q > 2 ? q : 1.0;
+        }
+    };
+    constexpr int kPhotons = 100000;
+    for (const bool window : {false, true}) {
+        std::vector<double> atScatterings(kPhotons), alongFlights(kPhotons);
+        int walked = 0;
+        for (int i = 0; i < kPhotons; ++i) {
+            Rng rng = Rng::forKey(9, static_cast<uint64_t>(i), 13);
+            Slab t;
+            t.window = window;
+            Photon ph;
+            ph.ray = Ray{Vec3(0, 0, 0), sampleUniformSphere(rng.uniform(), rng.uniform())};
+            ph.medium = tissue;
+            ph.lambda = 500;
+            ph.weight = 1;
+            walkPhoton(scene, ph, rng, t, false);
+            atScatterings[static_cast<size_t>(i)] = t.atScatterings;
+            alongFlights[static_cast<size_t>(i)] = t.alongFlights;
+            walked += t.flights;
+        }
+        auto mean = [&](auto&& f) { return meanOf(kPhotons, [&](int i) { return f(static_cast<size_t>(i)); }); };
+        const Estimate scatterings = mean([&](size_t i) { return atScatterings[i]; }), along = mean([&](size_t i) { return alongFlights[i]; });
+        // The same photons give both: their difference photon by photon has its own error.
+        const Estimate difference = mean([&](size_t i) { return alongFlights[i] - atScatterings[i]; });
+        const double zd = difference.mean / difference.stderr_;
+        std::printf("%s walk: at the scatterings %.5g ± %.2g, along the flights %.5g ± %.2g (difference z %.2f), %.1f flights a photon\n",
+                    window ? "window" : "analog", scatterings.mean, scatterings.stderr_, along.mean, along.stderr_, zd, double(walked) / kPhotons);
+        ASSERT_GT(scatterings.mean, 0);
+        EXPECT_LT(std::abs(zd), 4);
+        EXPECT_LT(along.stderr_, scatterings.stderr_);
+    }
 }
 
 // A survival far above the copies' bound at every vertex: the photon goes on as at most 4096 copies in all
