@@ -8,7 +8,8 @@
 // the phase lobe and the cone in turn (the cone's stratified in azimuth), each with its transmittance to the objective, landing where the
 // camera paths' geometry puts it and weighed by the PSF's h/h_geo there, so that the photons estimate exactly
 // what the camera paths' connections and branches estimated (those then leave it out:
-// PathStart::computedEmissionTraced). A vertex far from focus is imaged on pooled blocks, as the paths are.
+// PathStart::computedEmissionTraced). A vertex far from focus is imaged on pooled blocks, as the paths are;
+// near focus the scattering is imaged at points along the flights instead (ScatteredEmissionOptions::trackSlabMm).
 //
 // Every deposit is bounded (the photon's power over the directions drawn, times at most 2 and the PSF's
 // reweight), so the heavy tails of the camera side's connections, which met a bright neurite along a phase
