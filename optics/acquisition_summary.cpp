@@ -80,10 +80,15 @@ std::string AcquisitionSummary::addPlane(size_t slot, int plane, const PlaneImag
     std::sort(sorted.begin(), sorted.end());
     const double cut = sorted[static_cast<size_t>(0.9 * static_cast<double>(sorted.size() - 1))];
     const double cut1 = sorted[static_cast<size_t>(0.99 * static_cast<double>(sorted.size() - 1))];
+    const bool tracedVariance = image.emissionVariance.size() == image.electrons.size();
     for (size_t i = 0; i < image.electrons.size(); ++i) {
-        const double r = sqr(image.stderrElectrons[i]) / (std::max(0.0, image.electrons[i]) + darkElectrons_ + sqr(readNoise_));
-        mcOverCameraLargest_ = std::max(mcOverCameraLargest_, r);
-        if (r > 1) ++mcOverCameraAbove1_;
+        const double camera = std::max(0.0, image.electrons[i]) + darkElectrons_ + sqr(readNoise_), variance = sqr(image.stderrElectrons[i]);
+        mcOverCameraLargest_ = std::max(mcOverCameraLargest_, variance / camera);
+        if (!(variance > camera)) continue;
+        ++mcOverCameraAbove1_;
+        const double traced = tracedVariance ? image.emissionVariance[i] : 0.0;
+        if (traced > camera) ++tracedOverCameraAbove1_;
+        if (variance - traced > camera) ++pathsOverCameraAbove1_;
     }
     const bool traced = image.emissionEstimates.size() >= 2;
     const size_t halfSlots = image.emissionEstimates.size() / 2;
@@ -168,6 +173,8 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
         {"noise_budget", "scattered_emission_top1", median(budget_[kTracedPart][1]), budget_[kTracedPart][1].empty()},
         {"noise_budget", "paths_top10", median(budget_[kPathsPart][0]), budget_[kPathsPart][0].empty()},
         {"noise_budget", "paths_top1", median(budget_[kPathsPart][1]), budget_[kPathsPart][1].empty()},
+        {"noise_budget", "scattered_emission_pixels_above_1", double(tracedOverCameraAbove1_), false, true},
+        {"noise_budget", "paths_pixels_above_1", double(pathsOverCameraAbove1_), budget_[kPathsPart][0].empty(), true},
         {"", "median_relative_stderr_top10", median(pathRel_)},
         {"", "non_finite_samples", double(nonFinite_), false, true},
         {"", "largest_sample_over_pixel", largestOverPixel_},

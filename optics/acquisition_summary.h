@@ -53,6 +53,7 @@ private:
     // (Monte Carlo noise above the camera's: specks a viewer sees).
     double mcOverCameraLargest_ = 0;
     uint64_t mcOverCameraAbove1_ = 0;
+    uint64_t tracedOverCameraAbove1_ = 0, pathsOverCameraAbove1_ = 0;  // the same by part: the traced photons', the paths'
     uint64_t pathSamples_ = 0, pilotSamples_ = 0, pixels_ = 0, computedPoints_ = 0, nonFinite_ = 0;
     uint64_t pilotsOnLatticeOnlyPlanes_ = 0;
     double computedDropped_ = 0;

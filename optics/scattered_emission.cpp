@@ -42,9 +42,10 @@ constexpr double kUniformShare = 0.05;
 constexpr double kInvisible = 0.5;
 constexpr double kFarMm = 0.1;
 constexpr uint64_t kPhotonsPerPoint = 4;
-// The largest share of a photon's power one point of its flight near focus is imaged with (the track-length
-// estimator's points per flight follow from it).
-constexpr double kTrackShare = 1.0;
+// The most scatterings a flight's ray may expect within the slab around focus for its part there to be imaged
+// along it (ScatteredEmissionOptions::trackSlabMm); each of its points carries at most about this much of the
+// photon's power.
+constexpr double kTrackDepth = 0.25;
 
 // The photons' wavelengths: in proportion to the scene's dyes' emission times the detection, on 1 nm cells,
 // each at its largest value over 9 points across it (a filter's edge inside a cell must not leave the density
@@ -313,19 +314,26 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
             const double toSurface = sRefraction - sv;
             return rest * tracer.transmittance(v, v + w * std::max(0.0, toSurface - 1e-7), medium, wl, *rng)[0];
         }
-        // Scattering within trackSlab of the focal plane is imaged along the flights (flew), not here.
+        // Within trackSlab of the focal plane, a flight whose ray expects few scatterings there (σs times its
+        // length in the slab up to the surface ahead at most kTrackDepth) is imaged along its length, and its
+        // collision there is not imaged; other flights' collisions are. The choice depends on the ray only, so
+        // each flight is one estimator or the other, both unbiased. Where the ray expects many scatterings
+        // (uncleared cortex) the flight's points weigh as much as vertices and gain nothing: there, with half
+        // the directions, they doubled the traced part's variance over the brightest 1 %.
         double trackSlab = 0;
+        bool collisionTracked = false;  // the current flight's slab is imaged along it
         void scattered(const Photon& ph, const Vec3& p) override {
-            if (trackSlab > 0 && std::abs(imaging.local(p).dz) < trackSlab) return;
+            if (collisionTracked && std::abs(imaging.local(p).dz) < trackSlab) return;
             image(ph, p, &scene.media[static_cast<size_t>(ph.medium)].phase());
         }
         // The flight's part within trackSlab of the focal plane, imaged at points stratified along it, each
-        // weighed by σs there times the length it stands for (at most about kTrackShare of the photon's power)
-        // in half a vertex's directions: a point carries a few per cent of a photon where the tissue is thin.
-        void flew(const Photon& ph, double tEnd, const Medium& m, double sigmaS) override {
+        // weighed by σs there times the length it stands for, in half a vertex's directions: a point carries
+        // at most kTrackDepth of the photon's power, a few per cent where the tissue is thin.
+        void flew(const Photon& ph, double tEnd, double reach, const Medium& m, double sigmaS) override {
+            collisionTracked = false;
             if (!(trackSlab > 0) || !(sigmaS > 0) || !(ph.weight > 0) || m.isVacuumLike()) return;
             const double dz0 = imaging.local(ph.ray.o).dz, c = dot(ph.ray.d, axis);
-            double a = 0, b = tEnd;
+            double a = 0, b = reach;
             if (c == 0) {
                 if (!(std::abs(dz0) < trackSlab)) return;
             } else {
@@ -334,10 +342,14 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
                 b = std::min(b, std::max(t1, t2));
             }
             if (!(b > a)) return;
-            const double span = b - a;
             ChannelValues ch{};
-            m.channelValues(ph.ray.at(a + 0.5 * span), ch.data());
-            const int points = static_cast<int>(std::clamp(std::ceil(sigmaS * ch[kScatteringChannel] * span / kTrackShare), 1.0, 64.0));
+            m.channelValues(ph.ray.at(a + 0.5 * std::min(b - a, 1.0)), ch.data());
+            if (!(sigmaS * ch[kScatteringChannel] * (b - a) <= kTrackDepth)) return;
+            collisionTracked = true;
+            b = std::min(b, tEnd);
+            if (!(b > a)) return;
+            const double span = b - a;
+            const int points = static_cast<int>(std::clamp(std::ceil(sigmaS * ch[kScatteringChannel] * span / kTrackDepth), 1.0, 64.0));
             const HenyeyGreenstein& phase = m.phase();
             for (int j = 0; j < points; ++j) {
                 const Vec3 x = ph.ray.at(a + (j + rng->uniform()) * span / points);

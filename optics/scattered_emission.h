@@ -46,7 +46,7 @@ struct ScatteredEmissionOptions {
     double towardObjective = 0.7;
     // Within this distance of the focal plane (mm) the photons' scattering is imaged along their flights (a
     // track-length estimator: points of each flight across the slab, weighed by σs times the length they
-    // stand for) instead of at their scattering vertices: a vertex there images on a disc of a few pixels,
+    // stand for; only flights whose ray expects few scatterings in the slab) instead of at their vertices: a vertex there images on a disc of a few pixels,
     // and the few photons that scatter near focus made the traced part's heaviest deposits (docs/model.md,
     // "Scattered emission, traced forward"). 0 images every scattering vertex. In [0, 1].
     double trackSlabMm = 0.02;

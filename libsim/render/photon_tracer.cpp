@@ -162,7 +162,7 @@ void walkPhotonFrom(const Scene& scene, Photon ph, Rng& rng, PhotonEvents& event
                 s = tCollision;
                 return false;
             });
-            if (std::isfinite(s) || hit) events.flew(ph, std::isfinite(s) ? s : hit->t, m, spec.sigmaS[0]);
+            if (std::isfinite(s) || hit) events.flew(ph, std::isfinite(s) ? s : tHit, tHit, m, spec.sigmaS[0]);
             if (std::isfinite(s)) {
                 const MediumSample c = spec.at(ch.data());
                 const double sa = c.sigmaA[0], ss = c.sigmaS[0], st = sa + ss;

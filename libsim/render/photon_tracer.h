@@ -57,11 +57,13 @@ public:
     virtual ~PhotonEvents() = default;
     // A real scattering at p in the photon's medium; ph.ray.d is still the direction it arrived in.
     virtual void scattered(const Photon& /*ph*/, const Vec3& /*p*/) {}
-    // A free flight in medium m along ph.ray from t = 0 to tEnd (mm), ended by a collision or a surface;
-    // sigmaS: the medium's scattering at ph.lambda per unit of its scattering channel. Called before the
-    // collision's event. The expected scatterings in [t, t + dt] of a flight are σs(ray.at(t)) dt, so a sum of
-    // ∫ σs g dt over the flights has the mean of g summed at the scatterings (a track-length estimator).
-    virtual void flew(const Photon& /*ph*/, double /*tEnd*/, const Medium& /*m*/, double /*sigmaS*/) {}
+    // A free flight in medium m along ph.ray from t = 0 to tEnd (mm), ended by a collision or at the surface
+    // `reach` ahead (infinite if none); sigmaS: the medium's scattering at ph.lambda per unit of its
+    // scattering channel. Called before the collision's event. The expected scatterings in [t, t + dt] of a
+    // flight are σs(ray.at(t)) dt, so a sum of ∫ σs g dt over the flights has the mean of g summed at the
+    // scatterings (a track-length estimator); which of the two a flight uses may depend on its ray and reach,
+    // not on tEnd.
+    virtual void flew(const Photon& /*ph*/, double /*tEnd*/, double /*reach*/, const Medium& /*m*/, double /*sigmaS*/) {}
     // A dye absorbed the photon at p (before its quantum yield decides whether it re-emits).
     virtual void absorbedByDye(const Photon& /*ph*/) {}
     // About to scatter off a surface by its BSDF (walkPhoton's scatterAtSurfaces): n is the normal on the

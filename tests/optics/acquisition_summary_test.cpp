@@ -31,23 +31,33 @@ TEST(AcquisitionSummary, SaturatedPixelsAreToldApartFromMonteCarloOutliers) {
     EXPECT_EQ(none.monteCarlo, 0u);
 }
 
+// A 10 × 10 microscope of one channel without dark current, and its one-plane stack: every pixel expects
+// `electrons` with standard error `stderrElectrons`.
+struct FlatPlane {
+    Microscope m;
+    Stack stack;
+    FlatPlane(double readNoise, float electrons, float stderrElectrons) {
+        m.width = m.height = 10;
+        m.detector.darkCurrentElectronsPerS = 0;
+        m.detector.readNoiseElectrons = readNoise;
+        m.channels.push_back({});
+        m.channels.back().name = "c";
+        stack.width = stack.height = 10;
+        stack.planes = 1;
+        stack.channels = {0};
+        stack.expected.assign(100, electrons);
+        stack.stderrElectrons.assign(100, stderrElectrons);
+    }
+};
+
 // The noise budget: each part's noise variance over the camera's, per pixel, its median over the brightest
 // 10 % and 1 %. Known parts on a flat plane of 100 e-, no dark current or read noise: the field's half
 // difference 5 e- (0.25), the traced emission's slot halves 110 and 90 e- (half their difference, 10 e-: 1.0),
 // the paths' variance what stderr² holds beyond the traced part's (13 - 4: 0.09).
 TEST(AcquisitionSummary, TheNoiseBudgetSplitsTheVarianceByPart) {
-    Microscope m;
-    m.width = m.height = 10;
-    m.detector.darkCurrentElectronsPerS = 0;
-    m.detector.readNoiseElectrons = 0;
-    m.channels.push_back({});
-    m.channels.back().name = "c";
-    Stack stack;
-    stack.width = stack.height = 10;
-    stack.planes = 1;
-    stack.channels = {0};
-    stack.expected.assign(100, 100.f);
-    stack.stderrElectrons.assign(100, std::sqrt(13.f));
+    const FlatPlane flat(0, 100.f, std::sqrt(13.f));
+    const Microscope& m = flat.m;
+    const Stack& stack = flat.stack;
     AcquireOptions o;
     o.spp = 4;
     AcquisitionSummary summary(m, stack, o);
@@ -65,7 +75,9 @@ TEST(AcquisitionSummary, TheNoiseBudgetSplitsTheVarianceByPart) {
             EXPECT_FALSE(e.null) << e.name;
             budget[e.name] = e.value;
         }
-    ASSERT_EQ(budget.size(), 6u);
+    ASSERT_EQ(budget.size(), 8u);
+    EXPECT_EQ(budget["scattered_emission_pixels_above_1"], 0.0);  // every part's variance is below the camera's 100
+    EXPECT_EQ(budget["paths_pixels_above_1"], 0.0);
     for (const char* top : {"_top10", "_top1"}) {
         EXPECT_NEAR(budget[std::string("excitation_field") + top], 0.25, 1e-12);
         EXPECT_NEAR(budget[std::string("scattered_emission") + top], 1.0, 1e-12);
@@ -82,21 +94,12 @@ TEST(AcquisitionSummary, TheNoiseBudgetSplitsTheVarianceByPart) {
 }
 
 // Specks: over every pixel, the largest Monte Carlo variance over the camera's and how many pixels hold more
-// Monte Carlo noise than camera noise. A dark plane of 100 pixels at 4 e- with read noise 2 e- (camera variance
+// Monte Carlo noise than camera noise, in all and by part. A dark plane of 100 pixels at 4 e- with read noise 2 e- (camera variance
 // 8): one pixel at stderr 4 (16 / 8 = 2), one at 3 (9 / 8), the rest at 2 (4 / 8, below 1).
 TEST(AcquisitionSummary, SpecksAreCountedOverEveryPixel) {
-    Microscope m;
-    m.width = m.height = 10;
-    m.detector.darkCurrentElectronsPerS = 0;
-    m.detector.readNoiseElectrons = 2;
-    m.channels.push_back({});
-    m.channels.back().name = "c";
-    Stack stack;
-    stack.width = stack.height = 10;
-    stack.planes = 1;
-    stack.channels = {0};
-    stack.expected.assign(100, 4.f);
-    stack.stderrElectrons.assign(100, 2.f);
+    const FlatPlane flat(2, 4.f, 2.f);
+    const Microscope& m = flat.m;
+    const Stack& stack = flat.stack;
     AcquireOptions o;
     AcquisitionSummary summary(m, stack, o);
     PlaneImage image;
@@ -105,12 +108,21 @@ TEST(AcquisitionSummary, SpecksAreCountedOverEveryPixel) {
     image.stderrElectrons.assign(100, 2.0);
     image.stderrElectrons[17] = 4.0;
     image.stderrElectrons[93] = 3.0;
+    image.emissionVariance.assign(100, 0.0);
+    image.emissionVariance[17] = 12.0;
+    image.emissionVariance[93] = 6.0;
     summary.addPlane(0, 0, image);
     std::map<std::string, double> top;
     for (const AcquisitionSummary::Entry& e : summary.entries(stack, m, std::nullopt, 1))
         if (e.group.empty()) top[e.name] = e.value;
     EXPECT_NEAR(top.at("largest_mc_over_camera_variance"), 2.0, 1e-12);
     EXPECT_EQ(top.at("pixels_mc_over_camera_variance_above_1"), 2.0);
+    // By part: the traced photons' variance 12 of the stderr² 16 at pixel 17 (and 6 of 9 at 93): only it is above 8.
+    std::map<std::string, double> budget;
+    for (const AcquisitionSummary::Entry& e : summary.entries(stack, m, std::nullopt, 1))
+        if (e.group == "noise_budget") budget[e.name] = e.value;
+    EXPECT_EQ(budget.at("scattered_emission_pixels_above_1"), 1.0);
+    EXPECT_EQ(budget.at("paths_pixels_above_1"), 0.0);
 }
 
 }  // namespace

@@ -111,6 +111,21 @@ CropSum crop(const optics::PlaneImage& r, int x0, int y0, int size) {
     return c;
 }
 
+// Two renders of the same scene agree on the whole image and its four quadrants within 4 standard errors of
+// their difference, which must be below `sharpness` of the first's sum.
+void expectSameCrops(const optics::PlaneImage& first, const char* firstName, const optics::PlaneImage& second, const char* secondName,
+                     double sharpness) {
+    const int h = kSize / 2;
+    for (const auto& [x0, y0, size] : {std::tuple{0, 0, kSize}, {0, 0, h}, {h, 0, h}, {0, h, h}, {h, h, h}}) {
+        const CropSum a = crop(first, x0, y0, size), b = crop(second, x0, y0, size);
+        const double sigma = std::sqrt(a.variance + b.variance), z = (b.sum - a.sum) / sigma;
+        std::printf("    crop (%2d, %2d) %2d px: %s %.5g +- %.2g, %s %.5g +- %.2g e-, z = %+.2f\n", x0, y0, size, firstName, a.sum,
+                    std::sqrt(a.variance), secondName, b.sum, std::sqrt(b.variance), z);
+        EXPECT_LT(std::abs(z), 4.0);
+        EXPECT_LT(sigma, sharpness * a.sum) << "the comparison must be sharp";
+    }
+}
+
 // An adaptive render's image sum against a fixed count's, within 4 standard errors of their difference.
 void expectSameImageSum(const optics::PlaneImage& fixed, const optics::PlaneImage& adaptive) {
     const CropSum a = crop(fixed, 0, 0, kSize), b = crop(adaptive, 0, 0, kSize);
@@ -145,16 +160,7 @@ void expectSameImage(double sigmaS, int pathSpp, int splitSpp, uint64_t fieldPho
             EXPECT_EQ(split.fieldElectrons, 0.0);
         }
     }
-    // The whole image and its four quadrants.
-    const int h = kSize / 2;
-    for (const auto& [x0, y0, size] : {std::tuple{0, 0, kSize}, {0, 0, h}, {h, 0, h}, {0, h, h}, {h, h, h}}) {
-        const CropSum a = crop(path, x0, y0, size), b = crop(split, x0, y0, size);
-        const double sigma = std::sqrt(a.variance + b.variance), z = (b.sum - a.sum) / sigma;
-        std::printf("    crop (%2d, %2d) %2d px: path %.5g +- %.2g, split %.5g +- %.2g e-, z = %+.2f\n", x0, y0, size, a.sum,
-                    std::sqrt(a.variance), b.sum, std::sqrt(b.variance), z);
-        EXPECT_LT(std::abs(z), 4.0);
-        EXPECT_LT(sigma, 0.05 * a.sum) << "the comparison must be sharp";
-    }
+    expectSameCrops(path, "path", split, "split", 0.05);
 }
 
 TEST(SplitEstimator, MatchesThePathEstimatorInClearTissue) { expectSameImage(0.0, 256, 4); }
@@ -228,15 +234,7 @@ TEST(ScatteredEmission, FlightsNearFocusImageWhatTheVerticesImage) {
     std::printf("  traced: at the vertices %.4g e- (%.2f s), along the flights %.4g e- (%.2f s)\n", vertices.emissionElectrons,
                 vertices.emissionSeconds, flights.emissionElectrons, flights.emissionSeconds);
     ASSERT_GT(vertices.emissionElectrons, 0.05 * (vertices.computedElectrons + vertices.pathElectrons));
-    const int h = kSize / 2;
-    for (const auto& [x0, y0, size] : {std::tuple{0, 0, kSize}, {0, 0, h}, {h, 0, h}, {0, h, h}, {h, h, h}}) {
-        const CropSum a = crop(vertices, x0, y0, size), b = crop(flights, x0, y0, size);
-        const double sigma = std::sqrt(a.variance + b.variance), z = (b.sum - a.sum) / sigma;
-        std::printf("    crop (%2d, %2d) %2d px: vertices %.5g +- %.2g, flights %.5g +- %.2g e-, z = %+.2f\n", x0, y0, size, a.sum,
-                    std::sqrt(a.variance), b.sum, std::sqrt(b.variance), z);
-        EXPECT_LT(std::abs(z), 4.0);
-        EXPECT_LT(sigma, 0.03 * a.sum) << "the comparison must be sharp";
-    }
+    expectSameCrops(vertices, "vertices", flights, "flights", 0.03);
 }
 
 // The camera paths carrying the scattered emission (connections to the computed emission): the estimator

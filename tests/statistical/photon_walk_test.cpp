@@ -31,6 +31,16 @@ constexpr double kTargetRadius = 0.15;
 
 enum class Walk { Analog, Roulette, Window };
 
+// A photon of unit power at 500 nm leaving the centre in a uniform direction.
+Photon photonFromCentre(Rng& rng, int medium) {
+    Photon ph;
+    ph.ray = Ray{Vec3(0, 0, 0), sampleUniformSphere(rng.uniform(), rng.uniform())};
+    ph.medium = medium;
+    ph.lambda = 500;
+    ph.weight = 1;
+    return ph;
+}
+
 struct Tallies final : PhotonEvents {
     Walk walk = Walk::Analog;
     double unitPower = 1;
@@ -70,11 +80,7 @@ Result walkAll(Walk walk, int photons) {
         Rng rng = Rng::forKey(7, static_cast<uint64_t>(i), 11);
         Tallies t;
         t.walk = walk;
-        Photon ph;
-        ph.ray = Ray{Vec3(0, 0, 0), sampleUniformSphere(rng.uniform(), rng.uniform())};
-        ph.medium = tissue;
-        ph.lambda = 500;
-        ph.weight = 1;
+        const Photon ph = photonFromCentre(rng, tissue);
         // The source lies beyond the target: its unit power is its power over the importance there.
         t.unitPower = walk == Walk::Window ? 0.5 / (1 + t.beyondTarget(ph.ray.o) / 0.1) : 1.0;
         walkPhoton(scene, ph, rng, t, false);
@@ -127,7 +133,7 @@ TEST(PhotonWalk, FlightsGiveTheScatteringsTrackLengthEstimate) {
         void scattered(const Photon& ph, const Vec3& p) override {
             if (std::abs(p.x - kSlabX) < kHalf) atScatterings += ph.weight;
         }
-        void flew(const Photon& ph, double tEnd, const Medium& m, double sigmaS) override {
+        void flew(const Photon& ph, double tEnd, double, const Medium& m, double sigmaS) override {
             ++flights;
             double a = 0, b = tEnd;
             if (ph.ray.d.x == 0) {
@@ -156,12 +162,7 @@ TEST(PhotonWalk, FlightsGiveTheScatteringsTrackLengthEstimate) {
             Rng rng = Rng::forKey(9, static_cast<uint64_t>(i), 13);
             Slab t;
             t.window = window;
-            Photon ph;
-            ph.ray = Ray{Vec3(0, 0, 0), sampleUniformSphere(rng.uniform(), rng.uniform())};
-            ph.medium = tissue;
-            ph.lambda = 500;
-            ph.weight = 1;
-            walkPhoton(scene, ph, rng, t, false);
+            walkPhoton(scene, photonFromCentre(rng, tissue), rng, t, false);
             atScatterings[static_cast<size_t>(i)] = t.atScatterings;
             alongFlights[static_cast<size_t>(i)] = t.alongFlights;
             walked += t.flights;
