@@ -80,9 +80,10 @@ std::string AcquisitionSummary::addPlane(size_t slot, int plane, const PlaneImag
     std::sort(sorted.begin(), sorted.end());
     const double cut = sorted[static_cast<size_t>(0.9 * static_cast<double>(sorted.size() - 1))];
     const double cut1 = sorted[static_cast<size_t>(0.99 * static_cast<double>(sorted.size() - 1))];
+    auto cameraVariance = [&](size_t i) { return std::max(0.0, image.electrons[i]) + darkElectrons_ + sqr(readNoise_); };
     const bool tracedVariance = image.emissionVariance.size() == image.electrons.size();
     for (size_t i = 0; i < image.electrons.size(); ++i) {
-        const double camera = std::max(0.0, image.electrons[i]) + darkElectrons_ + sqr(readNoise_), variance = sqr(image.stderrElectrons[i]);
+        const double camera = cameraVariance(i), variance = sqr(image.stderrElectrons[i]);
         mcOverCameraLargest_ = std::max(mcOverCameraLargest_, variance / camera);
         if (!(variance > camera)) continue;
         ++mcOverCameraAbove1_;
@@ -94,7 +95,7 @@ std::string AcquisitionSummary::addPlane(size_t slot, int plane, const PlaneImag
     const size_t halfSlots = image.emissionEstimates.size() / 2;
     for (size_t i = 0; i < image.electrons.size(); ++i)
         if (image.electrons[i] >= cut) {
-            const double camera = std::max(0.0, image.electrons[i]) + darkElectrons_ + sqr(readNoise_);
+            const double camera = cameraVariance(i);
             mcOverCamera_.push_back(sqr(image.stderrElectrons[i]) / camera);
             if (image.electrons[i] > 0) pathRel_.push_back(image.stderrElectrons[i] / image.electrons[i]);
             std::array<std::optional<double>, kBudgetParts> part;

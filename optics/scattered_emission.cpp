@@ -43,8 +43,8 @@ constexpr double kInvisible = 0.5;
 constexpr double kFarMm = 0.1;
 constexpr uint64_t kPhotonsPerPoint = 4;
 // The most scatterings a flight's ray may expect within the slab around focus for its part there to be imaged
-// along it (ScatteredEmissionOptions::trackSlabMm); each of its points carries at most about this much of the
-// photon's power.
+// along it (ScatteredEmissionOptions::trackSlabMm); its one point there carries about this much of the
+// photon's power at most.
 constexpr double kTrackDepth = 0.25;
 
 // The photons' wavelengths: in proportion to the scene's dyes' emission times the detection, on 1 nm cells,
@@ -326,9 +326,9 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
             if (collisionTracked && std::abs(imaging.local(p).dz) < trackSlab) return;
             image(ph, p, &scene.media[static_cast<size_t>(ph.medium)].phase());
         }
-        // The flight's part within trackSlab of the focal plane, imaged at points stratified along it, each
-        // weighed by σs there times the length it stands for, in half a vertex's directions: a point carries
-        // at most kTrackDepth of the photon's power, a few per cent where the tissue is thin.
+        // The flight's part within trackSlab of the focal plane, imaged at one point uniform along it, weighed
+        // by σs there times its length, in half a vertex's directions: the point carries about kTrackDepth of
+        // the photon's power at most (the gate below), a few per cent where the tissue is thin.
         void flew(const Photon& ph, double tEnd, double reach, const Medium& m, double sigmaS) override {
             collisionTracked = false;
             if (!(trackSlab > 0) || !(sigmaS > 0) || !(ph.weight > 0) || m.isVacuumLike()) return;
@@ -349,15 +349,11 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
             b = std::min(b, tEnd);
             if (!(b > a)) return;
             const double span = b - a;
-            const int points = static_cast<int>(std::clamp(std::ceil(sigmaS * ch[kScatteringChannel] * span / kTrackDepth), 1.0, 64.0));
-            const HenyeyGreenstein& phase = m.phase();
-            for (int j = 0; j < points; ++j) {
-                const Vec3 x = ph.ray.at(a + (j + rng->uniform()) * span / points);
-                m.channelValues(x, ch.data());
-                Photon at = ph;
-                at.weight *= sigmaS * ch[kScatteringChannel] * span / points;
-                image(at, x, &phase, std::max(1, directions / 2));
-            }
+            const Vec3 x = ph.ray.at(a + rng->uniform() * span);
+            m.channelValues(x, ch.data());
+            Photon at = ph;
+            at.weight *= sigmaS * ch[kScatteringChannel] * span;
+            image(at, x, &m.phase(), std::max(1, directions / 2));
         }
         void reemitted(const Photon& ph, const Vec3& p) override { image(ph, p, nullptr); }
     };

@@ -465,6 +465,8 @@ TEST(AcquireCli, BadNumbersAreRejectedNotCast) {
         {{}, {"--field-diffuse-um", "0.5"}, {"--field-diffuse-um", "[1, 1000]", "0.5"}},
         {{}, {"--emission-photons", "1"}, {"--emission-photons", "[2, 2^40]", "1"}},
         {{}, {"--emission-photons", "-3"}, {"--emission-photons", "-3"}},
+        {{}, {"--emission-track-um", "-1"}, {"--emission-track-um", "[0, 1000]", "-1"}},
+        {{}, {"--emission-track-um", "nan"}, {"--emission-track-um", "nan"}},
     };
     for (const auto& [edit, extra, parts] : cases) {
         const auto r = run(edit, extra);

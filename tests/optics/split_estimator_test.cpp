@@ -415,7 +415,7 @@ TEST(AdaptiveSampling, TracesMoreFieldPhotonsWhereTheFieldMissesTheTarget) {
 // The options this session added refuse bad values by name and value: the photons' share toward the objective
 // (in [0, 1): at 1 no photon could leave elsewhere, and the estimate would lose that light), the field's diffuse
 // node spacing (>= 0, finite) in the acquisition's options and in the field's box.
-TEST(ScatteredEmission, BadShareAndDiffuseSpacingAreRefusedByName) {
+TEST(ScatteredEmission, BadShareTrackSlabAndDiffuseSpacingAreRefusedByName) {
     auto expectRefused = [](const std::function<void()>& validate, const std::vector<std::string>& parts) {
         try {
             validate();
@@ -428,6 +428,11 @@ TEST(ScatteredEmission, BadShareAndDiffuseSpacingAreRefusedByName) {
         optics::ScatteredEmissionOptions o;
         o.towardObjective = share;
         expectRefused([&] { o.validate(); }, {"toward the objective", std::to_string(share)});
+    }
+    for (double slab : {-0.001, 1.5, std::nan("")}) {
+        optics::ScatteredEmissionOptions o;
+        o.trackSlabMm = slab;
+        expectRefused([&] { o.validate(); }, {"track slab", std::to_string(slab)});
     }
     for (double spacing : {-2.0, std::numeric_limits<double>::infinity()}) {
         optics::ExcitationFieldOptions o;
