@@ -23,15 +23,23 @@ std::string formatted(const char* format, auto... args) {
 
 }  // namespace
 
-AcquisitionSummary::Saturation AcquisitionSummary::saturation(const Stack& stack, double fullWellElectrons) {
+AcquisitionSummary::Saturation AcquisitionSummary::saturation(const Stack& stack, const DetectorOptions& detector) {
     Saturation out;
+    const double fullWell = detector.fullWellElectrons;
+    const size_t planePixels = static_cast<size_t>(stack.width) * stack.height;
     for (size_t i = 0; i < stack.expected.size(); ++i) {
-        const float e = stack.expected[i];
-        out.brightest = std::max(out.brightest, double(e));
-        if (e > fullWellElectrons) {
-            ++out.pixels;
-            if (e - 4 * stack.stderrElectrons[i] < fullWellElectrons) ++out.monteCarlo;
-        }
+        const double e = stack.expected[i], stderrE = stack.stderrElectrons[i];
+        out.brightest = std::max(out.brightest, e);
+        if (!(e > fullWell)) continue;
+        ++out.pixels;
+        if (!(e - 4 * stderrE < fullWell)) continue;
+        // The expected electrons hold the dark current already.
+        const size_t pixel = planePixels > 0 ? i % planePixels : 0;
+        const double read = pixel < detector.readNoiseMapElectrons.size() ? detector.readNoiseMapElectrons[pixel] : detector.readNoiseElectrons;
+        if (sqr(stderrE) > e + sqr(read))
+            ++out.monteCarlo;
+        else
+            ++out.borderline;
     }
     return out;
 }
@@ -125,7 +133,7 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
                                                                    int ranks) const {
     float maxE = 0;
     for (float e : stack.expected) maxE = std::max(maxE, e);
-    const Saturation sat = saturation(stack, m.detector.fullWellElectrons);
+    const Saturation sat = saturation(stack, m.detector);
     const double total = std::max(1e-300, computedSum_ + pathSum_ + emissionSum_);
     const auto perPath = [&](uint64_t n) { return double(n) / std::max<double>(1.0, double(stats_.paths)); };
     const double vertices = perPath(stats_.scatteringEvents + stats_.surfaceBounces);
@@ -199,10 +207,11 @@ std::vector<AcquisitionSummary::Entry> AcquisitionSummary::entries(const Stack& 
         {"", "truncated_paths", double(stats_.truncated), false, true},
         {"", "largest_sample_electrons", largest_},
         {"", "max_expected_electrons", double(maxE)},
-        // Pixels expecting more than the full well, and of them those within 4 standard errors of it (Monte
-        // Carlo outliers rather than light the exposure puts there).
+        // Pixels expecting more than the full well; of them those Monte Carlo noise may have lifted there, and
+        // those at about the full well by the light itself (Saturation).
         {"", "saturated_pixels", double(sat.pixels), false, true},
         {"", "saturated_monte_carlo_pixels", double(sat.monteCarlo), false, true},
+        {"", "saturated_borderline_pixels", double(sat.borderline), false, true},
         {"", "full_well_electrons", m.detector.fullWellElectrons},
         {"", "exposure_s", m.detector.exposureS},
     };
@@ -225,14 +234,16 @@ std::vector<std::string> AcquisitionSummary::warnings(const Stack& stack, const 
                                 "of pixels, as a ratio of standard deviations), at %.3g paths per pixel on average (--max-spp %d)",
                                 *options_.noiseRatio, std::sqrt(mcOverCameraMedian), double(pathSamples_) / std::max<double>(1.0, double(pixels_)),
                                 options_.maxSpp));
-    const Saturation sat = saturation(stack, m.detector.fullWellElectrons);
+    const Saturation sat = saturation(stack, m.detector);
     if (sat.pixels > 0) {
         std::string which;
         if (sat.monteCarlo == sat.pixels)
-            which = "; each is within 4 Monte Carlo standard errors of the full well (rare large samples: more paths, not less exposure, may be "
-                    "what they need)";
+            which = "; each is within 4 Monte Carlo standard errors of the full well, each error over the camera's noise (rare large samples: more "
+                    "paths, not less exposure, may be what they need)";
         else if (sat.monteCarlo > 0)
-            which = formatted("; %zu of them lie within 4 Monte Carlo standard errors of it (they may be Monte Carlo noise)", sat.monteCarlo);
+            which = formatted("; %zu of them lie within 4 Monte Carlo standard errors of it, each error over the camera's noise (they may be Monte "
+                              "Carlo noise)",
+                              sat.monteCarlo);
         out.push_back(formatted("%zu of %zu pixels expect more than the full well (%.3g e-; brightest %.3g e-): the camera saturates there%s", sat.pixels,
                                 stack.expected.size(), m.detector.fullWellElectrons, sat.brightest, which.c_str()));
     }

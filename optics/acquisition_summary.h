@@ -33,13 +33,16 @@ public:
     // Warnings about the finished stack: a missed noise target, pixels expecting more than the full well.
     std::vector<std::string> warnings(const Stack& stack, const Microscope& microscope) const;
 
-    // Pixels of the stack expecting more than the full well; of them, those within 4 Monte Carlo standard
-    // errors of it.
+    // Pixels of the stack expecting more than the full well; of them, those Monte Carlo noise may have lifted
+    // there: within 4 standard errors of it, with an error over the camera's own noise of the pixel's signal
+    // (sqrt(signal + dark + read²), the project's yardstick). A pixel within 4 errors whose error is under the
+    // camera's noise is `borderline`: it expects about the full well by the light the exposure puts there, and
+    // the camera's shot noise moves it across the full well from frame to frame more than the Monte Carlo does.
     struct Saturation {
-        size_t pixels = 0, monteCarlo = 0;
+        size_t pixels = 0, monteCarlo = 0, borderline = 0;
         double brightest = 0;
     };
-    static Saturation saturation(const Stack& stack, double fullWellElectrons);
+    static Saturation saturation(const Stack& stack, const DetectorOptions& detector);
 
 private:
     AcquireOptions options_;

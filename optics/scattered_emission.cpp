@@ -42,10 +42,11 @@ constexpr double kUniformShare = 0.05;
 constexpr double kInvisible = 0.5;
 constexpr double kFarMm = 0.1;
 constexpr uint64_t kPhotonsPerPoint = 4;
-// The most scatterings a flight's ray may expect within the slab around focus for its part there to be imaged
-// along it (ScatteredEmissionOptions::trackSlabMm); its one point there carries about this much of the
-// photon's power at most.
+// The largest scattering optical depth across the slab around focus (ScatteredEmissionOptions::trackSlabMm,
+// at the photon's wavelength) for which the flights' parts there are imaged along them; and the most σs times
+// length one of their points carries (at most about that share of the photon's power).
 constexpr double kTrackDepth = 0.25;
+constexpr double kTrackPointDepth = 0.125;
 
 // The photons' wavelengths: in proportion to the scene's dyes' emission times the detection, on 1 nm cells,
 // each at its largest value over 9 points across it (a filter's edge inside a cell must not leave the density
@@ -223,6 +224,14 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
         double survival(const Photon& ph, const Vec3& p) override { return weightWindowSurvival(ph.weight, importance(imaging.local(p)), unitPower); }
 
         void image(const Photon& ph, const Vec3& v, const HenyeyGreenstein* phase) { image(ph, v, phase, directions); }
+        // The weight window's splitting, at the points a photon is imaged: it splits only after a collision, so a
+        // photon that comes from where it matters less (a source far from focus or outside the field) reaches the
+        // focal plane over the window's top, and its first points there would be imaged as one heavy photon. They
+        // take as many times the directions instead (as many copies would).
+        int copiesAt(const Photon& ph, const Vec3& x) const {
+            const double q = weightWindowSurvival(ph.weight, importance(imaging.local(x)), unitPower);
+            return q > 1 ? static_cast<int>(std::min(kMostCopiesAtAVertex, std::ceil(q))) : 1;
+        }
         void image(const Photon& ph, const Vec3& v, const HenyeyGreenstein* phase, int n) {
             if (!(ph.weight > 0) || ph.medium == kNone) return;
             ++slot->vertices;
@@ -314,21 +323,23 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
             const double toSurface = sRefraction - sv;
             return rest * tracer.transmittance(v, v + w * std::max(0.0, toSurface - 1e-7), medium, wl, *rng)[0];
         }
-        // Within trackSlab of the focal plane, a flight whose ray expects few scatterings there (σs times its
-        // length in the slab up to the surface ahead at most kTrackDepth) is imaged along its length, and its
-        // collision there is not imaged; other flights' collisions are. The choice depends on the ray only, so
-        // each flight is one estimator or the other, both unbiased. Where the ray expects many scatterings
-        // (uncleared cortex) the flight's points weigh as much as vertices and gain nothing: there, with half
-        // the directions, they doubled the traced part's variance over the brightest 1 %.
+        // Within trackSlab of the focal plane, where the tissue is thin across the slab (σs × its thickness at
+        // most kTrackDepth), the flights are imaged along their length, and their collisions there are not. The
+        // choice depends on the medium, the point and the wavelength only, so each flight is one estimator or the
+        // other, both unbiased. Where the tissue is thick (uncleared cortex) a flight's points weigh as much as
+        // vertices and gain nothing: there they raised the traced part's variance over the brightest 1 % up to
+        // 20× on one seed (docs/performance.md).
         double trackSlab = 0;
         bool collisionTracked = false;  // the current flight's slab is imaged along it
         void scattered(const Photon& ph, const Vec3& p) override {
             if (collisionTracked && std::abs(imaging.local(p).dz) < trackSlab) return;
-            image(ph, p, &scene.media[static_cast<size_t>(ph.medium)].phase());
+            image(ph, p, &scene.media[static_cast<size_t>(ph.medium)].phase(), directions * copiesAt(ph, p));
         }
-        // The flight's part within trackSlab of the focal plane, imaged at one point uniform along it, weighed
-        // by σs there times its length, in half a vertex's directions: the point carries about kTrackDepth of
-        // the photon's power at most (the gate below), a few per cent where the tissue is thin.
+        // The flight's part within trackSlab of the focal plane, imaged at points stratified along it, each
+        // weighed by σs there times its share of the length: at least two, each carrying σs × length at most
+        // kTrackPointDepth, each in a quarter of a vertex's directions (two: one from the phase lobe, one from the
+        // cone). A flight nearly parallel to the focal plane thus spreads its light along its track instead of
+        // onto the one pixel under its collision.
         void flew(const Photon& ph, double tEnd, double reach, const Medium& m, double sigmaS) override {
             collisionTracked = false;
             if (!(trackSlab > 0) || !(sigmaS > 0) || !(ph.weight > 0) || m.isVacuumLike()) return;
@@ -342,20 +353,27 @@ ScatteredEmissionImage traceScatteredEmission(const Scene& scene, const PathTrac
                 b = std::min(b, std::max(t1, t2));
             }
             if (!(b > a)) return;
+            // The choice by the tissue where the ray enters the slab (not where it collides), so that it depends on
+            // the ray alone where the scattering varies.
             ChannelValues ch{};
-            m.channelValues(ph.ray.at(a + 0.5 * std::min(b - a, 1.0)), ch.data());
-            if (!(sigmaS * ch[kScatteringChannel] * (b - a) <= kTrackDepth)) return;
+            m.channelValues(ph.ray.at(a), ch.data());
+            if (!(sigmaS * ch[kScatteringChannel] * 2 * trackSlab <= kTrackDepth)) return;
             collisionTracked = true;
             b = std::min(b, tEnd);
-            if (!(b > a)) return;
+            if (!(b > a) || !std::isfinite(b)) return;
             const double span = b - a;
-            const Vec3 x = ph.ray.at(a + rng->uniform() * span);
-            m.channelValues(x, ch.data());
-            Photon at = ph;
-            at.weight *= sigmaS * ch[kScatteringChannel] * span;
-            image(at, x, &m.phase(), std::max(1, directions / 2));
+            m.channelValues(ph.ray.at(a + 0.5 * span), ch.data());
+            const int points = static_cast<int>(std::clamp(std::ceil(sigmaS * ch[kScatteringChannel] * span / kTrackPointDepth), 2.0, 4096.0));
+            const int pointDirections = std::max(1, directions / 4);
+            for (int j = 0; j < points; ++j) {
+                const Vec3 x = ph.ray.at(a + (j + rng->uniform()) / points * span);
+                m.channelValues(x, ch.data());
+                Photon at = ph;
+                at.weight *= sigmaS * ch[kScatteringChannel] * span / points;
+                image(at, x, &m.phase(), pointDirections * copiesAt(ph, x));
+            }
         }
-        void reemitted(const Photon& ph, const Vec3& p) override { image(ph, p, nullptr); }
+        void reemitted(const Photon& ph, const Vec3& p) override { image(ph, p, nullptr, directions * copiesAt(ph, p)); }
     };
 
     // With a field, the photons leave the dye cells of media whose dye lies in grids (the computed emission

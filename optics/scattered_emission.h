@@ -46,9 +46,10 @@ struct ScatteredEmissionOptions {
     double towardObjective = 0.7;
     // Within this distance of the focal plane (mm) the photons' scattering is imaged along their flights (a
     // track-length estimator: points of each flight across the slab, weighed by σs times the length they
-    // stand for; only flights whose ray expects few scatterings in the slab) instead of at their vertices: a vertex there images on a disc of a few pixels,
-    // and the few photons that scatter near focus made the traced part's heaviest deposits (docs/model.md,
-    // "Scattered emission, traced forward"). 0 images every scattering vertex. In [0, 1].
+    // stand for; where the tissue is thin across the slab, σs × its thickness at most 0.25) instead of at their
+    // vertices: a vertex there images on a disc of a few pixels, and the few photons that scatter near focus
+    // made the traced part's heaviest deposits (docs/model.md, "Near focus, along the flights"). 0 images every
+    // scattering vertex. In [0, 1].
     double trackSlabMm = 0.02;
     void validate() const;                 // ConfigError naming the field and value
 };

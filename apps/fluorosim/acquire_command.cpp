@@ -198,9 +198,8 @@ void addAcquireCommand(CLI::App& app) {
                     "carry it)");
     cmd->add_option("--emission-track-um", a->emissionTrackUm,
                     "Split estimator: within this distance (um) of the focal plane the traced photons' scattering is imaged at points along "
-                    "their flights, weighed by the scattering coefficient (a track-length estimator, on flights that expect few scatterings "
-                    "there), instead of where they scatter (default "
-                    "20; 0: at every scattering)");
+                    "their flights, weighed by the scattering coefficient (a track-length estimator, where the scattering coefficient times "
+                    "the slab's thickness is at most 0.25), instead of where they scatter (default 20; 0: at every scattering)");
     cmd->add_option("--seed", a->seed, "Random seed (default: the scene's)");
     cmd->add_option("--exposure", a->exposure,
                     "Exposure: a time with a unit (\"20ms\"), or auto[:F]: after the stack is rendered, scale it to the exposure that puts "

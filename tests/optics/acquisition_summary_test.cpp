@@ -10,25 +10,42 @@ namespace fluorosim::optics {
 namespace {
 
 // A pixel over the full well is light the exposure puts there unless it lies within 4 standard errors of
-// the full well: then a rare large Monte Carlo sample may be all that lifts it.
+// the full well and its error is over the camera's noise (sqrt(signal + read²)): then a rare large Monte Carlo
+// sample may be all that lifts it. Within 4 errors that are under the camera's noise, it is borderline.
 TEST(AcquisitionSummary, SaturatedPixelsAreToldApartFromMonteCarloOutliers) {
     Stack stack;
-    stack.width = 5;
+    stack.width = 7;
     stack.height = 1;
     stack.planes = 1;
     stack.channels = {0};
-    //                 below   real    real    outlier  outlier at the edge
-    stack.expected = {900.f, 1500.f, 1200.f, 3000.f, 1100.f};
-    stack.stderrElectrons = {500.f, 10.f, 40.f, 2900.f, 25.f + 1e-3f};
-    const AcquisitionSummary::Saturation s = AcquisitionSummary::saturation(stack, 1000.0);
-    EXPECT_EQ(s.pixels, 4u);
-    EXPECT_EQ(s.monteCarlo, 2u);  // 3000 − 4 × 2900 and 1100 − 4 × 25.001 lie below 1000; 1200 − 4 × 40 does not
+    DetectorOptions detector;
+    detector.fullWellElectrons = 1000;
+    detector.readNoiseElectrons = 2;
+    //                 below   real    real    outlier  outlier  border  border: 32.4² < 1050 + 4 < 32.5²
+    stack.expected = {900.f, 1500.f, 1200.f, 3000.f, 1100.f, 1100.f, 1050.f};
+    stack.stderrElectrons = {500.f, 10.f, 40.f, 2900.f, 40.f, 26.f, 32.4f};
+    AcquisitionSummary::Saturation s = AcquisitionSummary::saturation(stack, detector);
+    EXPECT_EQ(s.pixels, 6u);
+    EXPECT_EQ(s.monteCarlo, 2u);  // 3000 − 4 × 2900 and 1100 − 4 × 40 lie below 1000, with 2900² > 3004 and 40² > 1104
+    EXPECT_EQ(s.borderline, 2u);  // 1100 − 4 × 26 and 1050 − 4 × 32.4 too, with 26² < 1104 and 32.4² < 1054
     EXPECT_EQ(s.brightest, 3000.0);
 
-    stack.expected = {900.f, 999.f, 0.f, 1000.f, 10.f};
-    const AcquisitionSummary::Saturation none = AcquisitionSummary::saturation(stack, 1000.0);
+    stack.stderrElectrons[6] = 32.5f;  // 32.5² = 1056.25 > 1054: now the Monte Carlo's
+    s = AcquisitionSummary::saturation(stack, detector);
+    EXPECT_EQ(s.monteCarlo, 3u);
+    EXPECT_EQ(s.borderline, 1u);
+
+    // A read-noise map, per pixel of the plane: 10 e- rms on the last pixel lifts its camera variance over 32.5².
+    detector.readNoiseMapElectrons = {2, 2, 2, 2, 2, 2, 10};
+    s = AcquisitionSummary::saturation(stack, detector);
+    EXPECT_EQ(s.monteCarlo, 2u);
+    EXPECT_EQ(s.borderline, 2u);
+
+    stack.expected = {900.f, 999.f, 0.f, 1000.f, 10.f, 0.f, 0.f};
+    const AcquisitionSummary::Saturation none = AcquisitionSummary::saturation(stack, detector);
     EXPECT_EQ(none.pixels, 0u);  // at the full well is not over it
     EXPECT_EQ(none.monteCarlo, 0u);
+    EXPECT_EQ(none.borderline, 0u);
 }
 
 // A 10 × 10 microscope of one channel without dark current, and its one-plane stack: every pixel expects

@@ -71,8 +71,8 @@ def test_acquire_gives_the_cli_stack(tmp_path):
     # The CLI's summary, under the same names; timings and file paths aside, the same numbers.
     summary = json.loads(run.stdout)
     for key in ("planes", "channels", "width", "spp", "seed", "estimator", "computed_electrons_fraction", "computed_points", "paths",
-                "largest_sample_electrons", "max_expected_electrons", "saturated_pixels", "saturated_monte_carlo_pixels", "exposure_s", "exposure_auto",
-                "noise_ratio_target"):
+                "largest_sample_electrons", "max_expected_electrons", "saturated_pixels", "saturated_monte_carlo_pixels",
+                "saturated_borderline_pixels", "exposure_s", "exposure_auto", "noise_ratio_target"):
         assert stack["summary"][key] == summary[key], key
     assert set(summary["computed_timings"]) == set(stack["summary"]["computed_timings"])
     # The same scene as a dict (relative mesh path resolved against `base`).
