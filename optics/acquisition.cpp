@@ -116,6 +116,13 @@ private:
 
 // Adaptive sampling traces at most this many times the first count of field photons.
 constexpr double kMostFieldFactor = 16;
+// Under a target at the camera's noise or finer the field starts at this many times its count: its noise is
+// correlated across the image, so its estimate from two halves has about one degree of freedom over the
+// brightest pixels, and on two seeds in six it read a fraction of the field's variance and stopped short
+// (σs 1–2 /mm at --noise-ratio 0.6: 0.11–0.26 of the camera's variance; docs/performance.md, "The field's
+// start under a camera target"). Starting there, not adding to a pilot's field, traces the field and the
+// computed image once.
+constexpr double kAdaptiveFieldStart = 4;
 // Pilot paths of adaptive sampling draw from sample indices the estimate never reaches.
 constexpr uint64_t kPilotSample = uint64_t(1) << 40;
 // The further traces of adaptive sampling (field and photons) draw from streams keyed apart from the first's.
@@ -259,8 +266,10 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
         return std::max(medianVarianceOverCamera(variance, signal, 0.9, darkElectrons, detector.readNoiseElectrons),
                         medianVarianceOverCamera(variance, signal, brightest, darkElectrons, detector.readNoiseElectrons));
     };
+    AcquireOptions fieldStart = o;
+    if (o.noiseRatio && *o.noiseRatio <= 1) fieldStart.field.photons = static_cast<uint64_t>(kAdaptiveFieldStart * static_cast<double>(o.field.photons));
     if (model) {
-        field = traceExcitationField(scene, tracer, imaging, *model, o, streamKey);
+        field = traceExcitationField(scene, tracer, imaging, *model, fieldStart, streamKey);
         if (!fieldComplete() || !makeComputed()) {
             r.complete = false;
             return r;
@@ -315,7 +324,9 @@ PlaneImage renderWith(const Scene& scene, const PathTracer& tracer, const Object
                     variance[i] = sqr(halfDifference) / kMedianOfChiSquare1;
                     signal[i] = computed[i] + traced.electrons[i];
                 }
-                fieldPhotons = adaptiveExtraPhotons(overBrightest(variance, signal), *o.noiseRatio, kMostFieldFactor, o.field.photons);
+                fieldPhotons = adaptiveExtraPhotons(overBrightest(variance, signal), *o.noiseRatio,
+                                                    kMostFieldFactor * static_cast<double>(o.field.photons) / static_cast<double>(fieldStart.field.photons),
+                                                    fieldStart.field.photons);
                 if (fieldPhotons > 0 && !poolMoreField(fieldPhotons, kAdaptiveStreams)) {
                     r.complete = false;
                     return r;

@@ -445,6 +445,27 @@ TEST(AdaptiveSampling, TracesMorePhotonsWhereTheTracedEmissionMissesTheTarget) {
 // quarter of the traced photons misses the target over the brightest tenth or 1 %, a further field (at most 16
 // times the first count) is pooled with the first and the computed image made again; the mean stays that of
 // the fixed count.
+// Under a target at the camera's noise or finer the field starts at 4 times its count, whatever its own noise
+// estimate (one degree of freedom over a correlated field) says; over a looser target, only what the estimate
+// asks (here nothing: the computed image is the same).
+TEST(AdaptiveSampling, TheFieldTakesFourTimesItsCountUnderACameraTarget) {
+    // Dim dye (a 20 000th of the other tests'), so that the field's own estimate meets the target.
+    const Scene scene = filamentScene(2.0, 0.1, {{-20, -10, -5}, {20, 10, 12}}, [](int, int j, int k) {
+        return 0.01 * std::exp(-(j * j + k * k) / 2.0) + 0.005 * std::exp(-(j * j + (k - 8) * (k - 8)) / 2.0);
+    });
+    constexpr uint64_t kField = 200000;
+    const optics::PlaneImage fixed = render(scene, optics::Estimator::Split, 2, 52, std::nullopt, kField);
+    const optics::PlaneImage camera = render(scene, optics::Estimator::Split, 2, 52, 1.0, kField);
+    const optics::PlaneImage loose = render(scene, optics::Estimator::Split, 2, 52, 1e6, kField);
+    std::printf("  field photons: fixed %llu, target 1 %llu, target 1e6 %llu; brightest pixel %.3g e-\n", static_cast<unsigned long long>(fixed.fieldPhotons),
+                static_cast<unsigned long long>(camera.fieldPhotons), static_cast<unsigned long long>(loose.fieldPhotons),
+                *std::max_element(fixed.electrons.begin(), fixed.electrons.end()));
+    EXPECT_EQ(camera.fieldPhotons, 4 * fixed.fieldPhotons);  // the start, not the estimate
+    EXPECT_EQ(loose.fieldPhotons, fixed.fieldPhotons);
+    EXPECT_EQ(loose.computedImage, fixed.computedImage);
+    expectSameImageSum(fixed, camera);
+}
+
 TEST(AdaptiveSampling, TracesMoreFieldPhotonsWhereTheFieldMissesTheTarget) {
     const Scene scene = filamentScene(2.0);
     constexpr uint64_t kField = 20000;
