@@ -176,8 +176,9 @@ void addAcquireCommand(CLI::App& app) {
                     "camera's noise of the expected signal, sqrt(signal + dark + read^2), decided from separate pilot paths (first on every fourth pixel across and down, elsewhere only near those that ask for more); and the traced "
                     "scattered emission's photons (up to 32 times --emission-photons) until their median variance over the brightest tenth "
                     "and 1 % is at most half the target's, and, decided from a pilot of a quarter of those photons, the excitation field's "
-                    "(up to 16 times --field-photons) until its variance in the computed and traced image over the brightest tenth and 1 % "
-                    "(its squared half difference over 0.455, the median of a one-degree-of-freedom chi-square) is at most half the target's");
+                    "(from 4 times --field-photons where the target is at most 1, up to 16 times it) until its variance in the computed and "
+                    "traced image over the brightest tenth and 1 % (its squared half difference over 0.455, the median of a "
+                    "one-degree-of-freedom chi-square) is at most half the target's");
     cmd->add_option("--max-spp", a->maxSpp, "Adaptive sampling: most paths per pixel (default 4096)");
     cmd->add_option("--field-photons", a->fieldPhotons,
                     "Split estimator: photons per beam line and plane of the excitation field, which computes the scattered excitation "
