@@ -35,8 +35,7 @@ AcquisitionSummary::Saturation AcquisitionSummary::saturation(const Stack& stack
         if (!(e - 4 * stderrE < fullWell)) continue;
         // The expected electrons hold the dark current already.
         const size_t pixel = planePixels > 0 ? i % planePixels : 0;
-        const double read = pixel < detector.readNoiseMapElectrons.size() ? detector.readNoiseMapElectrons[pixel] : detector.readNoiseElectrons;
-        if (sqr(stderrE) > e + sqr(read))
+        if (sqr(stderrE) > e + sqr(detector.readNoiseAt(pixel)))
             ++out.monteCarlo;
         else
             ++out.borderline;
